@@ -3,3 +3,6 @@
 from ident.parameters import N_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, Box
 
 __all__ = ["Box", "N_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS"]
+from ident.regressor import EXTRA_NAMES, inverse_dynamics, parameter_names, regressor  # noqa: E402
+
+__all__ += ["EXTRA_NAMES", "inverse_dynamics", "parameter_names", "regressor"]

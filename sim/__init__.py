@@ -1,1 +1,20 @@
-"""h4bench: sim."""
+"""h4bench simulation: the H4 in MuJoCo, its geometry and kinematics, ground truth."""
+
+from sim.kinematics import (
+    Jacobians,
+    KinematicsError,
+    cartesian_motion,
+    forward_kinematics,
+    inverse_kinematics,
+    jacobian_dot,
+    jacobians,
+    singularity_measure,
+)
+from sim.model import DEFAULT_MODEL_PATH, H4Geometry, ModelError, load_model
+from sim.truth import TRUE_PARAMETER_ORDER, nacelle_mass_matrix, true_parameters
+
+__all__ = [
+    "DEFAULT_MODEL_PATH", "H4Geometry", "Jacobians", "KinematicsError", "ModelError", "TRUE_PARAMETER_ORDER",
+    "cartesian_motion", "forward_kinematics", "inverse_kinematics", "jacobian_dot", "jacobians", "load_model",
+    "nacelle_mass_matrix", "singularity_measure", "true_parameters",
+]

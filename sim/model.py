@@ -1,0 +1,171 @@
+"""Loading the H4 MJCF and reading its geometry from the compiled model."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+DEFAULT_MODEL_PATH = Path(__file__).resolve().parent.parent / "models" / "h4.xml"
+MOTOR_JOINTS = ("q1", "q2", "q3", "q4")
+NACELLE_JOINTS = ("x", "y", "z", "theta")
+FOREARM_TENDONS = ("forearm1", "forearm2", "forearm3", "forearm4")
+
+
+class ModelError(ValueError):
+    """The MJCF file is missing, does not compile, or is not an H4 as this package expects."""
+
+
+def load_model(path: str | Path | None = None) -> mujoco.MjModel:
+    """Compile an H4 MJCF file (default ``models/h4.xml``) into a ``mujoco.MjModel``.
+
+    Raises :class:`ModelError` naming the path when the file is missing or MuJoCo rejects it.
+    """
+    path = DEFAULT_MODEL_PATH if path is None else Path(path)
+    if not path.is_file():
+        raise ModelError(f"model path must be an existing MJCF file, got {str(path)!r} (not found)")
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    except Exception as exc:  # mujoco raises ValueError with the compiler's message
+        raise ModelError(f"model path {str(path)!r} is not a valid MJCF model: {exc}") from exc
+    _check_structure(model, path)
+    return model
+
+
+def _check_structure(model: mujoco.MjModel, path) -> None:
+    names = MOTOR_JOINTS + NACELLE_JOINTS
+    for name in names:
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name) < 0:
+            raise ModelError(f"model {str(path)!r} must define joint {name!r} (an H4 needs joints {names})")
+    for name in FOREARM_TENDONS:
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, name) < 0:
+            raise ModelError(f"model {str(path)!r} must define the forearm tendon {name!r}")
+    if model.nu != 4:
+        raise ModelError(f"model {str(path)!r} must have 4 actuators (one per motor), got {model.nu}")
+
+
+def _rot_z(theta: np.ndarray) -> np.ndarray:
+    """(n,) angles -> (n, 3, 3) rotations about the world z axis."""
+    c, s = np.cos(theta), np.sin(theta)
+    out = np.zeros(theta.shape + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1], out[..., 2, 2] = c, -s, s, c, 1.0
+    return out
+
+
+@dataclass(frozen=True)
+class H4Geometry:
+    """The H4's geometry as compiled by MuJoCo (world frame, SI units), read at ``qpos0``.
+
+    Chain i (i = 0..3): motor axis through ``motor_pos[i]`` along ``motor_axis[i]``; arm tip
+    ``B_i(q) = P_i + L_i (cos q e_i + sin q (u_i x e_i))`` with ``e_i = arm_dir[i]`` the arm direction at q = 0;
+    forearm of length ``forearm_length[i]`` from B_i to the nacelle point
+    ``A_i(x) = D + Rz(theta) bar_offset[i] + attach_offset[i]`` (D = (x, y, z); the lateral bars only translate,
+    so ``attach_offset`` does not rotate; ``bar_offset[i]`` is DC_k of the paper for the bar carrying chain i).
+    """
+
+    motor_pos: np.ndarray  # (4, 3) P_i [m]
+    motor_axis: np.ndarray  # (4, 3) u_i unit
+    arm_dir: np.ndarray  # (4, 3) e_i unit
+    arm_length: np.ndarray  # (4,) L_i [m]
+    forearm_length: np.ndarray  # (4,) l_i [m]
+    bar_offset: np.ndarray  # (4, 3) D -> C_k(i) at theta = 0 [m]
+    attach_offset: np.ndarray  # (4, 3) C_k(i) -> A_i [m]
+    gravity: np.ndarray  # (3,) [m/s^2]
+    q_range: np.ndarray  # (4, 2) motor joint limits [rad]
+    x_home: np.ndarray  # (4,) nacelle pose of the 'home' keyframe (or qpos0) [m, m, m, rad]
+    # qpos bookkeeping
+    qpos_motor: np.ndarray  # (4,) qpos addresses of q1..q4
+    qpos_nacelle: np.ndarray  # (4,) qpos addresses of x, y, z, theta
+    qpos_lateral: np.ndarray  # (k,) qpos addresses of the lateral bar hinges
+    nacelle_qpos0: np.ndarray  # (4,) qpos0 of x, y, z, theta
+    nacelle_origin0: np.ndarray  # (4,) (D, theta) at qpos0
+    lateral_qpos0: np.ndarray  # (k,)
+    nq: int
+    dof_motor: np.ndarray  # (4,) dof addresses of q1..q4
+
+    @classmethod
+    def from_model(cls, model: mujoco.MjModel) -> "H4Geometry":
+        if not isinstance(model, mujoco.MjModel):
+            raise TypeError(f"model must be a mujoco.MjModel, got {type(model).__name__}")
+        data = mujoco.MjData(model)
+        data.qpos[:] = model.qpos0
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_tendon(model, data)
+
+        def jid(name):
+            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+
+        def sid(name):
+            i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+            if i < 0:
+                raise ModelError(f"model must define site {name!r} (arm tip B_i / nacelle point A_i)")
+            return i
+
+        motor_ids = [jid(n) for n in MOTOR_JOINTS]
+        nac_ids = [jid(n) for n in NACELLE_JOINTS]
+        P = np.array([data.xanchor[j] for j in motor_ids])
+        u = np.array([data.xaxis[j] for j in motor_ids])
+        B = np.array([data.site_xpos[sid(f"B{i + 1}")] for i in range(4)])
+        A = np.array([data.site_xpos[sid(f"A{i + 1}")] for i in range(4)])
+        arm = B - P
+        arm_perp = arm - np.sum(arm * u, axis=1, keepdims=True) * u
+        if np.max(np.abs(arm - arm_perp)) > 1e-9:
+            raise ModelError("each arm tip B_i must lie in the plane through the motor axis' anchor normal to it")
+        L = np.linalg.norm(arm, axis=1)
+        e = arm / L[:, None]
+        D0 = data.xpos[model.jnt_bodyid[nac_ids[0]]].copy()
+        theta_axis = data.xaxis[nac_ids[3]]
+        if not np.allclose(theta_axis, [0.0, 0.0, 1.0], atol=1e-12):
+            raise ModelError(f"the nacelle's theta joint must turn about the world vertical, got axis {theta_axis}")
+        # which lateral bar carries A_i: the site's body; C_k = that body's origin
+        lateral_bodies = [model.site_bodyid[sid(f"A{i + 1}")] for i in range(4)]
+        C = np.array([data.xpos[b] for b in lateral_bodies])
+        lateral_joints = []
+        for b in dict.fromkeys(lateral_bodies):
+            if model.body_jntnum[b] != 1:
+                raise ModelError("each lateral bar must have exactly one hinge (its rotation relative to the nacelle)")
+            lateral_joints.append(model.body_jntadr[b])
+        ten_ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, n) for n in FOREARM_TENDONS]
+        l = np.array([data.ten_length[t] for t in ten_ids])
+        if not np.allclose(l, np.linalg.norm(B - A, axis=1), rtol=0, atol=1e-12):
+            raise ModelError("the forearm tendons must run straight from B_i to A_i")
+        key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
+        nac_adr = np.array([model.jnt_qposadr[j] for j in nac_ids])
+        qpos_home = model.key_qpos[key] if key >= 0 else model.qpos0
+        nacelle_qpos0 = model.qpos0[nac_adr].copy()
+        origin0 = np.concatenate([D0, [0.0]])
+        x_home = origin0 + (qpos_home[nac_adr] - nacelle_qpos0)
+        q_range = np.array([model.jnt_range[j] if model.jnt_limited[j] else (-np.pi, np.pi) for j in motor_ids])
+        arrays = dict(
+            motor_pos=P, motor_axis=u, arm_dir=e, arm_length=L, forearm_length=l,
+            bar_offset=C - D0, attach_offset=A - C, gravity=model.opt.gravity.copy(), q_range=q_range,
+            x_home=x_home, qpos_motor=np.array([model.jnt_qposadr[j] for j in motor_ids]),
+            qpos_nacelle=nac_adr, qpos_lateral=np.array([model.jnt_qposadr[j] for j in lateral_joints]),
+            nacelle_qpos0=nacelle_qpos0, nacelle_origin0=origin0,
+            lateral_qpos0=np.array([model.qpos0[model.jnt_qposadr[j]] for j in lateral_joints]),
+            dof_motor=np.array([model.jnt_dofadr[j] for j in motor_ids]),
+        )
+        for v in arrays.values():
+            v.setflags(write=False)
+        return cls(nq=int(model.nq), **arrays)
+
+    def qpos(self, q, x) -> np.ndarray:
+        """Full MuJoCo qpos (n, nq) (or (nq,)) from motor angles q (n, 4) and nacelle pose x (n, 4)."""
+        q = np.asarray(q, dtype=float)
+        x = np.asarray(x, dtype=float)
+        single = q.ndim == 1
+        q2, x2 = np.atleast_2d(q), np.atleast_2d(x)
+        out = np.zeros((q2.shape[0], self.nq))
+        out[:, self.qpos_motor] = q2
+        out[:, self.qpos_nacelle] = self.nacelle_qpos0 + (x2 - self.nacelle_origin0)
+        dtheta = x2[:, 3] - self.nacelle_origin0[3]
+        out[:, self.qpos_lateral] = self.lateral_qpos0[None, :] - dtheta[:, None]
+        return out[0] if single else out
+
+    def nacelle_pose(self, qpos) -> np.ndarray:
+        """Nacelle pose x (n, 4) read from MuJoCo qpos (n, nq)."""
+        qpos = np.asarray(qpos, dtype=float)
+        return self.nacelle_origin0 + (qpos[..., self.qpos_nacelle] - self.nacelle_qpos0)
