@@ -18,3 +18,21 @@ __all__ = [
     "cartesian_motion", "forward_kinematics", "inverse_kinematics", "jacobian_dot", "jacobians", "load_model",
     "nacelle_mass_matrix", "singularity_measure", "true_parameters",
 ]
+from sim.controller import ControllerDesign, JointController, VelocityFilter, design_joint_controller  # noqa: E402
+from sim.dataset import Dataset, DatasetError, GroundTruth, atomic_write_bytes  # noqa: E402
+from sim.simulate import (  # noqa: E402
+    NOISE_SHAPES,
+    SimulationError,
+    SimulationSettings,
+    TorqueNoise,
+    axis_inertia,
+    default_controller,
+    quantise,
+    simulate,
+)
+
+__all__ += [
+    "ControllerDesign", "Dataset", "DatasetError", "GroundTruth", "JointController", "NOISE_SHAPES",
+    "SimulationError", "SimulationSettings", "TorqueNoise", "VelocityFilter", "atomic_write_bytes", "axis_inertia",
+    "default_controller", "design_joint_controller", "quantise", "simulate",
+]
