@@ -1,8 +1,8 @@
 """Identification: interval arithmetic, the H4 regressor, data processing and estimators."""
 
-from ident.parameters import N_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, Box
+from ident.parameters import N_PARAMETERS, NOMINAL_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, Box
 
-__all__ = ["Box", "N_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS"]
+__all__ = ["Box", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS"]
 from ident.regressor import EXTRA_NAMES, inverse_dynamics, parameter_names, regressor  # noqa: E402
 
 __all__ += ["EXTRA_NAMES", "inverse_dynamics", "parameter_names", "regressor"]

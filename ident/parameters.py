@@ -19,6 +19,13 @@ PARAMETER_NAMES: tuple[str, ...] = (
 PARAMETER_UNITS: tuple[str, ...] = ("kg m^2",) * 4 + ("kg", "kg m^2") + ("N m s/rad",) * 4 + ("N m",) * 4
 N_PARAMETERS = len(PARAMETER_NAMES)
 
+# What a designer knows before identification: the paper's a priori values (Table 1: Imot 0.012 kg m^2,
+# Mnac 1.0 kg; Ibc taken as 0.003 kg m^2, Table 2's order, since the a priori 0.0008 ignores the lateral bars)
+# and frictions of the order of its Table 2. Used for control, feed-forward and trajectory checks; never
+# as a truth.
+NOMINAL_PARAMETERS: tuple[float, ...] = (0.012, 0.012, 0.012, 0.012, 1.0, 0.003,
+                                         0.16, 0.06, 0.09, 0.09, 1.15, 1.10, 0.72, 0.99)
+
 
 @dataclass(frozen=True)
 class Box:
