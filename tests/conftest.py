@@ -77,3 +77,31 @@ def friction_saturated(qd, qdd, h, band=0.005):
 @pytest.fixture(scope="session")
 def exact_recording(model, geometry):
     return record_exact(model, geometry, seconds=2.0, seed=0)
+
+
+NOMINAL = np.array(__import__('ident').NOMINAL_PARAMETERS)
+
+
+def cartesian_reference(geometry, seconds=3.0, dt=1e-3, seed=0, amp=(0.06, 0.06, 0.08, 0.25)):
+    """A smooth nacelle reference (sines with a smoothstep ramp-in) mapped to the joints; qd, qdd by
+    differentiating q (np.gradient): enough to drive the controller in tests."""
+    import types
+
+    t = np.arange(int(round(seconds / dt))) * dt
+    rng = np.random.default_rng(seed)
+    f, p = rng.uniform(0.3, 0.9, 4), rng.uniform(0, 2 * np.pi, 4)
+    s = np.clip(t / 0.5, 0, 1)
+    x = geometry.x_home + np.asarray(amp) * (s * s * (3 - 2 * s))[:, None] * np.sin(2 * np.pi * f * t[:, None] + p)
+    q = sim.inverse_kinematics(geometry, x)
+    qd = np.gradient(q, dt, axis=0)
+    return types.SimpleNamespace(t=t, x=x, q=q, qd=qd, qdd=np.gradient(qd, dt, axis=0))
+
+
+def run_experiment(model, geometry, seconds=3.0, noise=None, seed=0, encoder_counts=20000):
+    import ident
+
+    ref = cartesian_reference(geometry, seconds=seconds, seed=seed)
+    _, controller = sim.default_controller(geometry, NOMINAL)
+    ff = ident.inverse_dynamics(geometry, NOMINAL, ref.q, ref.qd, ref.qdd)
+    return ref, *sim.simulate(model, ref, noise=noise, controller=controller, feedforward=ff, seed=seed,
+                              settings=sim.SimulationSettings(encoder_counts=encoder_counts))
