@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import importlib.metadata
+import json
+import sys
+from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -17,6 +21,171 @@ app = typer.Typer(
 @app.callback()
 def main() -> None:
     """h4bench: simulate the H4, identify its 14 dynamic parameters with guaranteed boxes, check them."""
+
+
+def _fail(message: str) -> None:
+    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(2)
+
+
+def _print_summary(result: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(stderr=False)
+    table = Table(title=f"{result['scenario']} (seed {result['seed']})")
+    table.add_column("parameter")
+    table.add_column("true", justify="right")
+    methods = {k: v for k, v in result.get("methods", {}).items() if v.get("status") == "ok" and v.get("lower")}
+    for name in methods:
+        table.add_column(f"{name} box", justify="right")
+        table.add_column("in", justify="center")
+    if "wls" in result:
+        table.add_column("WLS", justify="right")
+        table.add_column("%sigma", justify="right")
+    true = result.get("true")
+    for j, pname in enumerate(result["parameters"]):
+        row = [pname, "-" if true is None else f"{true[j]:.4g}"]
+        for m in methods.values():
+            row.append(f"[{m['lower'][j]:.4g}, {m['upper'][j]:.4g}]")
+            enc = m.get("enclosed")
+            row.append("-" if not enc else ("yes" if enc[j] else "[red]NO[/red]"))
+        if "wls" in result:
+            row += [f"{result['wls']['theta'][j]:.4g}", f"{result['wls']['rel_std_percent'][j]:.3g}"]
+        table.add_row(*row)
+    console.print(table)
+    for key in ("bound", "bound_processed", "oracle_residual", "min_consistent_bound"):
+        if result.get(key) is not None:
+            console.print(f"{key}: {result[key]:.4g} N m")
+    for name, m in result.get("methods", {}).items():
+        if m.get("status") != "ok":
+            console.print(f"[red]{name}: {m.get('message')}[/red]")
+        elif "misses" in m:
+            console.print(f"{name}: {m['misses']} miss(es) in {result['runs']} runs; with the bound covering the "
+                          f"residual: {len(m['misses_with_bound_covering_residual'])}")
+
+
+class _Progress:
+    """A rich progress bar fed by the runner's progress(stage, done, total) calls."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.bar = None
+        self.tasks = {}
+
+    def __enter__(self):
+        if self.enabled:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                                TimeElapsedColumn(), transient=False, console=None)
+            self.bar.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
+
+    def __call__(self, stage: str, done: int = 0, total: int = 0) -> None:
+        if self.bar is None:
+            return
+        if stage not in self.tasks:
+            self.tasks[stage] = self.bar.add_task(stage, total=max(total, 1))
+        self.bar.update(self.tasks[stage], completed=done, total=max(total, 1))
+
+
+@app.command()
+def run(
+    name: str = typer.Argument(..., help="scenario name (h4bench scenarios) or a TOML path"),
+    seed: Optional[int] = typer.Option(None, help="seed (default: the scenario's)"),
+    model: Optional[Path] = typer.Option(None, help="another MJCF model of the H4"),
+    out: Optional[Path] = typer.Option(None, help="output folder (default runs/NAME)"),
+    quick: bool = typer.Option(False, "--quick", help="the reduced size used in CI"),
+    as_json: bool = typer.Option(False, "--json", help="print result.json instead of the table"),
+    scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address for campaigns (host:port)"),
+    workers: Optional[int] = typer.Option(None, help="local worker processes for campaigns"),
+) -> None:
+    """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
+    from scenarios.runner import run_scenario
+
+    try:
+        with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
+            result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
+                                  scheduler=scheduler, workers=workers)
+    except ValueError as exc:  # ScenarioError, ModelError, DatasetError, InconsistentDataError, ...
+        _fail(str(exc))
+    if as_json:
+        typer.echo(json.dumps(result, indent=2, default=str))
+    else:
+        _print_summary(result)
+        typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
+
+
+@app.command()
+def scenarios() -> None:
+    """List the scenarios."""
+    from scenarios.spec import available, load_spec
+
+    for name in available():
+        spec = load_spec(name)
+        typer.echo(f"{name:20s} {spec['description']}")
+
+
+@app.command()
+def identify(
+    file: Path = typer.Argument(..., help="CSV log: header t,q1..q4,tau1..tau4 (SI units)"),
+    bound: float = typer.Option(..., help="bound on |tau - W theta| for every raw sample [N m]"),
+    method: str = typer.Option("hull", help="hull | cgsp | wls"),
+    prior_lower: float = typer.Option(0.0, help="prior lower bound of every parameter"),
+    prior_upper: float = typer.Option(2.0, help="prior upper bound of every parameter"),
+    model: Optional[Path] = typer.Option(None, help="MJCF model giving the robot's geometry"),
+    out: Optional[Path] = typer.Option(None, help="output folder (default runs/identify-<file stem>)"),
+    as_json: bool = typer.Option(False, "--json", help="print result.json"),
+) -> None:
+    """The estimators on a user's own data; prints the table and writes result.json."""
+    from scenarios.identify import identify_csv
+
+    try:
+        result = identify_csv(file, bound, method=method, prior=(prior_lower, prior_upper), model=model, out=out)
+    except ValueError as exc:
+        _fail(str(exc))
+    if as_json:
+        typer.echo(json.dumps(result, indent=2, default=str))
+    else:
+        _print_summary(result)
+
+
+@app.command()
+def replay(
+    file: Path = typer.Argument(..., help="a replay.rrd written by h4bench run"),
+    web: bool = typer.Option(False, "--web", help="serve the web viewer instead of the native one"),
+) -> None:
+    """Open a run's replay in the Rerun viewer."""
+    from scenarios.replay import open_viewer
+
+    try:
+        open_viewer(file, web=web)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(str(exc))
+
+
+@app.command()
+def controller(
+    bandwidth_hz: float = typer.Option(15.0, help="requested tracking bandwidth [Hz]"),
+    model: Optional[Path] = typer.Option(None, help="MJCF model"),
+) -> None:
+    """Print the joint controller design: gains, bandwidth, margins, step response (python-control)."""
+    import numpy as np
+
+    import ident
+    import sim
+
+    try:
+        geometry = sim.H4Geometry.from_model(sim.load_model(model))
+        design, _ = sim.default_controller(geometry, np.asarray(ident.NOMINAL_PARAMETERS), bandwidth_hz=bandwidth_hz)
+    except ValueError as exc:
+        _fail(str(exc))
+    typer.echo(design.report())
 
 
 @app.command()

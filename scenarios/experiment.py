@@ -1,0 +1,186 @@
+"""One experiment, end to end: trajectory -> closed-loop simulation -> processing -> estimators -> checks.
+
+The ground truth is read here only to *check* (enclosure, oracle residual, error budget), never passed to an
+estimator. The controller and the feed-forward are designed from the nominal (a priori) parameters.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import ident
+import sim
+from ident.filtering import ProcessingSettings
+from ident.processing import Equation, build_equation
+from scenarios.budget import error_budget
+
+
+@dataclass
+class ExperimentRun:
+    """Everything one experiment produced (in memory); :meth:`result` is its JSON-able summary."""
+
+    spec: dict
+    seed: int
+    model_path: str
+    model: object
+    geometry: sim.H4Geometry
+    theta_true: np.ndarray
+    reference: object
+    dataset: sim.Dataset
+    truth: sim.GroundTruth
+    settings: ProcessingSettings
+    equation: Equation
+    prior: ident.Box
+    bound_raw: float
+    boxes: dict = field(default_factory=dict)  # method -> Box
+    failures: dict = field(default_factory=dict)  # method -> message (e.g. inconsistent data)
+    seconds: dict = field(default_factory=dict)
+    wls: object = None
+    min_consistent_bound: float = float("nan")
+    budget: dict = field(default_factory=dict)
+    controller_report: str = ""
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def residual(self) -> np.ndarray:
+        """Oracle residual ``y - W theta_true`` on the rows the estimators saw (m,) [N m]."""
+        return self.equation.y - self.equation.W @ self.theta_true
+
+    def result(self) -> dict:
+        eq = self.equation
+        r = np.abs(self.residual)
+        names = list(eq.names)
+        methods = {}
+        for name, box in self.boxes.items():
+            enclosed = box.contains(self.theta_true)
+            methods[name] = {
+                "status": "ok",
+                "lower": box.lower.tolist(),
+                "upper": box.upper.tolist(),
+                "enclosed": enclosed.tolist(),
+                "all_enclosed": bool(enclosed.all()),
+                "width": box.width.tolist(),
+                "seconds": self.seconds.get(name),
+                "info": {k: v for k, v in box.info.items() if isinstance(v, (int, float, str, bool, list))},
+            }
+        for name, message in self.failures.items():
+            methods[name] = {"status": "failed", "message": message, "seconds": self.seconds.get(name)}
+        out = {
+            "scenario": self.spec["name"],
+            "kind": self.spec["kind"],
+            "seed": self.seed,
+            "model": self.model_path,
+            "quick": self.spec.get("quick_applied", False),
+            "parameters": names,
+            "units": list(ident.PARAMETER_UNITS) + ["kg m", "kg m", "kg m", "kg m"] + ["kg"] * 4
+            if len(names) > 14 else list(ident.PARAMETER_UNITS),
+            "true": self.theta_true.tolist(),
+            "bound": self.bound_raw,
+            "bound_parts": {"noise": self.spec["noise"]["bound"], "allowance": self.spec["bound"]["allowance"]},
+            "bound_processed": float(eq.bound.max()),
+            "filter_l1_norm": eq.info.get("l1_norm", 1.0),
+            "min_consistent_bound": self.min_consistent_bound,
+            "oracle_residual": float(r.max()),
+            "bound_covers_residual": bool(np.all(r <= eq.bound)),
+            "rows": len(eq),
+            "rows_raw": eq.info.get("rows_raw"),
+            "noise": self.spec["noise"],
+            "prior": {"lower": self.prior.lower.tolist(), "upper": self.prior.upper.tolist()},
+            "methods": methods,
+            "budget": self.budget,
+            "timings": self.timings,
+            "duration": float(self.dataset.t[-1] - self.dataset.t[0]),
+        }
+        if self.wls is not None:
+            out["wls"] = {"theta": np.asarray(self.wls.theta).tolist(), "std": np.asarray(self.wls.std).tolist(),
+                          "rel_std_percent": np.asarray(self.wls.rel_std_percent).tolist()}
+        return out
+
+
+def make_reference(spec: dict, geometry, seed: int):
+    """The exciting trajectory of a spec (trajectories package), seeded."""
+    import trajectories
+
+    tr = spec["trajectory"]
+    if tr["kind"] != "fourier":
+        raise ValueError(f"trajectory.kind must be 'fourier', got {tr['kind']!r}")
+    return trajectories.fourier_excitation(geometry, duration=tr["duration"], harmonics=tr["harmonics"],
+                                           base_hz=tr["base_hz"], seed=seed, optimise=tr["optimise"])
+
+
+def nominal_parameters() -> np.ndarray:
+    """The a priori parameter values a designer has (controller, feed-forward, trajectory checks)."""
+    return np.asarray(ident.NOMINAL_PARAMETERS, dtype=float)
+
+
+def run_experiment(spec: dict, seed: int | None = None, model=None, model_path: str | Path | None = None,
+                   theta_true=None, reference=None, estimate: bool = True, progress=None) -> ExperimentRun:
+    """Run one experiment of ``spec``. ``model``: a compiled variant (e.g. randomised parameters) whose truth
+    is ``theta_true`` (default ``sim.true_parameters(model)``); else loaded from ``model_path``."""
+    seed = spec["seed"] if seed is None else int(seed)
+    timings = {}
+    t0 = time.perf_counter()
+    path = str(model_path or spec["model"] or sim.DEFAULT_MODEL_PATH)
+    model = sim.load_model(path) if model is None else model
+    geometry = sim.H4Geometry.from_model(model)
+    structure = spec["structure"]["regressor"]
+    theta_true = sim.true_parameters(model) if theta_true is None else np.asarray(theta_true, dtype=float)
+    nominal = nominal_parameters()
+    if reference is None:
+        reference = make_reference(spec, geometry, seed)
+    timings["trajectory"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    design, controller = sim.default_controller(geometry, nominal, bandwidth_hz=spec["controller"]["bandwidth_hz"])
+    ff = ident.inverse_dynamics(geometry, nominal, reference.q, reference.qd, reference.qdd) \
+        if spec["controller"]["feedforward"] else None
+    nz = spec["noise"]
+    noise = sim.TorqueNoise(nz["bound"], nz["shape"] if nz["bound"] > 0 else "none", nz["frequency_hz"])
+    dataset, truth = sim.simulate(
+        model, reference, noise=noise, controller=controller, feedforward=ff, seed=seed,
+        settings=sim.SimulationSettings(encoder_counts=spec["encoder"]["counts_per_turn"] or None),
+        metadata={"scenario": spec["name"], "model": path}, progress=progress,
+    )
+    timings["simulation"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    settings = ProcessingSettings(dt=dataset.dt, **spec["processing"])
+    p = len(ident.parameter_names(structure))
+    prior = ident.Box(np.full(p, spec["prior"]["lower"]), np.full(p, spec["prior"]["upper"]),
+                      ident.parameter_names(structure))
+    bound_raw = spec["noise"]["bound"] + spec["bound"]["allowance"]
+    equation = build_equation(geometry, dataset, bound_raw, settings, prior=prior, structure=structure)
+    timings["processing"] = time.perf_counter() - t0
+    run = ExperimentRun(spec=spec, seed=seed, model_path=path, model=model, geometry=geometry,
+                        theta_true=theta_true, reference=reference, dataset=dataset, truth=truth, settings=settings,
+                        equation=equation, prior=prior, bound_raw=bound_raw, controller_report=design.report(),
+                        timings=timings)
+    t0 = time.perf_counter()
+    run.budget = error_budget(geometry, dataset, truth, settings, structure, theta=theta_true)
+    timings["budget"] = time.perf_counter() - t0
+    if estimate:
+        estimate_boxes(run)
+    return run
+
+
+def estimate_boxes(run: ExperimentRun) -> None:
+    """Run the spec's estimators on the run's equation (never on the truth)."""
+    eq, prior = run.equation, run.prior
+    t0 = time.perf_counter()
+    run.min_consistent_bound = float(ident.min_consistent_bound(eq.W, eq.y, prior))
+    run.seconds["min_consistent_bound"] = time.perf_counter() - t0
+    for method in run.spec["estimators"]["methods"]:
+        t0 = time.perf_counter()
+        try:
+            run.boxes[method] = ident.estimate(eq.W, eq.y, eq.bound, prior, method=method)
+        except ident.InconsistentDataError as exc:
+            run.failures[method] = str(exc)
+        run.seconds[method] = time.perf_counter() - t0
+    if run.spec["estimators"]["wls"]:
+        t0 = time.perf_counter()
+        run.wls = ident.wls(eq.W, eq.y, joints=4)
+        run.seconds["wls"] = time.perf_counter() - t0

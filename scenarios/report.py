@@ -1,0 +1,145 @@
+"""Reports of scenario runs: Markdown tables in the form of the paper's Tables 1 and 2, and PNG plots.
+
+matplotlib is imported lazily, inside the plotting functions.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+# The paper's Table 1 (CGSP boxes on the real H4) and Table 2 (WLS, %sigma): Poignet, Ramdani & Vivas,
+# CDC 2003, section 4.2. Fc there is Fs here.
+PAPER_TABLE1 = {
+    "Imot1": (0.0009, 0.0238), "Imot2": (0.0044, 0.0257), "Imot3": (0.0096, 0.0320), "Imot4": (0.0098, 0.0319),
+    "Mnac": (0.7650, 1.2338), "Ibc": (0.0000, 0.0071), "Fv1": (0.0000, 0.4690), "Fv2": (0.1733, 0.2554),
+    "Fv3": (0.0000, 0.2856), "Fv4": (0.0000, 0.2664), "Fs1": (0.0000, 1.6068), "Fs2": (0.0000, 1.6300),
+    "Fs3": (0.2245, 1.0952), "Fs4": (0.2264, 1.1014),
+}
+PAPER_TABLE2 = {
+    "Imot1": (0.0141, 2.6286), "Imot2": (0.0120, 3.0444), "Imot3": (0.0153, 1.6939), "Imot4": (0.0213, 1.1933),
+    "Mnac": (1.0492, 0.4236), "Ibc": (0.0030, 3.5049), "Fv1": (0.1636, 5.6781), "Fv2": (0.0560, 15.5674),
+    "Fv3": (0.0930, 6.5734), "Fv4": (0.0917, 6.4301), "Fs1": (1.1453, 2.0450), "Fs2": (1.0950, 2.0563),
+    "Fs3": (0.7222, 2.8366), "Fs4": (0.9932, 2.0451),
+}
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.4g}" if abs(v) >= 1e-3 or v == 0 else f"{v:.3e}"
+
+
+def _box_cell(m: dict, j: int) -> str:
+    return f"[{_fmt(m['lower'][j])}, {_fmt(m['upper'][j])}]"
+
+
+def table1(result: dict) -> str:
+    """Boxes beside the truth: one row per parameter, hull and cgsp side by side, widths and their ratio."""
+    names, true = result["parameters"], result["true"]
+    methods = {k: v for k, v in result["methods"].items() if v.get("status") == "ok"}
+    head = ["parameter", "true"]
+    for k in methods:
+        head += [f"{k} box", f"{k} width", f"{k} encl."]
+    if "hull" in methods and "cgsp" in methods:
+        head.append("cgsp/hull width")
+    head.append("paper Table 1")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for j, name in enumerate(names):
+        row = [f"`{name}`", _fmt(true[j])]
+        for m in methods.values():
+            row += [_box_cell(m, j), _fmt(m["width"][j]), "yes" if m["enclosed"][j] else "**NO**"]
+        if "hull" in methods and "cgsp" in methods:
+            hw, cw = methods["hull"]["width"][j], methods["cgsp"]["width"][j]
+            row.append(f"{cw / hw:.3g}" if hw > 0 else "inf")
+        paper = PAPER_TABLE1.get(name)
+        row.append(f"[{paper[0]}, {paper[1]}]" if paper else "-")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def table2(result: dict) -> str:
+    """Weighted least squares with %sigma beside the truth and the paper's Table 2."""
+    if "wls" not in result:
+        return "(no WLS)"
+    names, true, w = result["parameters"], result["true"], result["wls"]
+    lines = ["| parameter | true | WLS | error % | %sigma | paper WLS | paper %sigma |", "|---|---|---|---|---|---|---|"]
+    for j, name in enumerate(names):
+        paper = PAPER_TABLE2.get(name, ("-", "-"))
+        err = 100 * (w["theta"][j] - true[j]) / true[j] if true[j] else float("nan")
+        lines.append(f"| `{name}` | {_fmt(true[j])} | {_fmt(w['theta'][j])} | {err:+.2f} | "
+                     f"{w['rel_std_percent'][j]:.3g} | {paper[0]} | {paper[1]} |")
+    return "\n".join(lines)
+
+
+def budget_table(result: dict) -> str:
+    b = result.get("budget") or {}
+    if not b:
+        return "(no budget)"
+    lines = ["| part | raw max [N m] | raw p99 | processed max | processed p99 |", "|---|---|---|---|---|"]
+    for part in ("noise", "derivatives", "model"):
+        r, p = b["raw"][part], b["processed"][part]
+        lines.append(f"| {part} | {r['max']:.4g} | {r['p99']:.4g} | {p['max']:.4g} | {p['p99']:.4g} |")
+    lines.append(f"| **total** | {b['total_raw_max']:.4g} | | {b['total_processed_max']:.4g} | |")
+    return "\n".join(lines)
+
+
+def summary_lines(result: dict) -> list[str]:
+    lines = [
+        f"- assumed bound on raw rows: {result['bound']:.4g} N m = injected noise {result['bound_parts']['noise']:.4g} "
+        f"+ allowance {result['bound_parts']['allowance']:.4g} (derivatives, model); after the parallel filter "
+        f"(||h||_1 = {result['filter_l1_norm']:.4g}): {result['bound_processed']:.4g} N m on {result['rows']} rows",
+        f"- oracle residual max|y - W theta_true| = {result['oracle_residual']:.4g} N m "
+        f"({'covered' if result['bound_covers_residual'] else '**NOT covered**'} by the bound)",
+        f"- min consistent bound (Chebyshev fit over the prior) = {result['min_consistent_bound']:.4g} N m",
+    ]
+    for name, m in result["methods"].items():
+        if m.get("status") == "ok":
+            lines.append(f"- {name}: all enclosed = {m['all_enclosed']}, mean width {np.mean(m['width']):.4g}, "
+                         f"{m['seconds']:.3g} s")
+        else:
+            lines.append(f"- {name}: {m.get('message')}")
+    return lines
+
+
+def write_paper_report(result: dict, out: Path, extra: str = "") -> None:
+    from sim.dataset import atomic_write_bytes
+
+    text = "\n".join([
+        f"# Scenario `{result['scenario']}` (seed {result['seed']}{', quick' if result['quick'] else ''})", "",
+        *summary_lines(result), "",
+        "## Table 1: guaranteed boxes (prior [" + f"{result['prior']['lower'][0]}, {result['prior']['upper'][0]}])",
+        "", table1(result), "", "## Table 2: weighted least squares", "", table2(result), "",
+        "## Error budget (oracle residual split by source)", "", budget_table(result), "",
+        "Plots: `boxes.png` (boxes against the truth).", "", extra,
+    ])
+    atomic_write_bytes(out / "report.md", text.encode())
+
+
+def plot_boxes(result: dict, path: Path, title: str | None = None) -> None:
+    """One row per parameter: each method's box divided by the true value, the truth at 1."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names, true = result["parameters"], np.asarray(result["true"])
+    methods = {k: v for k, v in result["methods"].items() if v.get("status") == "ok"}
+    colours = {"hull": "tab:blue", "cgsp": "tab:orange", "relaxed": "tab:green", "interval": "tab:purple"}
+    fig, ax = plt.subplots(figsize=(9, 0.45 * len(names) + 1.5))
+    y = np.arange(len(names))[::-1]
+    offsets = np.linspace(-0.2, 0.2, max(len(methods), 1))
+    for (name, m), off in zip(methods.items(), offsets):
+        lo, hi = np.asarray(m["lower"]) / true, np.asarray(m["upper"]) / true
+        ax.hlines(y + off, lo, hi, colors=colours.get(name, "tab:gray"), lw=4, label=name)
+    if "wls" in result:
+        ax.plot(np.asarray(result["wls"]["theta"]) / true, y, "k|", ms=12, label="WLS")
+    ax.axvline(1.0, color="crimson", lw=1.5, label="truth")
+    ax.set_yticks(y, names)
+    ax.set_xscale("symlog", linthresh=0.1)
+    ax.set_xlabel("box / true value (symlog)")
+    ax.set_title(title or f"{result['scenario']}: boxes against the truth")
+    ax.legend(loc="lower right", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,95 @@
+"""Scenario specifications: TOML files beside this module (``scenarios/<name>.toml``) or given by path.
+
+A spec is a nested table merged over :data:`DEFAULTS`; unknown sections or keys are errors (a typo must not
+silently fall back to a default). ``[quick]`` holds overrides applied by ``--quick`` (CI-sized runs), with the
+same structure as the spec itself.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+
+SPEC_DIR = Path(__file__).resolve().parent
+KINDS = ("paper", "enclosure", "prior_bound", "structure", "outliers", "uncertain_regressor")
+
+
+class ScenarioError(ValueError):
+    """Unknown scenario, malformed TOML or a bad value in a scenario spec."""
+
+
+DEFAULTS: dict = {
+    "name": "",
+    "kind": "paper",
+    "description": "",
+    "seed": 0,
+    "model": "",  # empty: models/h4.xml
+    "trajectory": {"kind": "fourier", "duration": 10.0, "harmonics": 5, "base_hz": 0.2, "optimise": True},
+    "controller": {"bandwidth_hz": 15.0, "feedforward": True},
+    "noise": {"shape": "uniform", "bound": 1.0, "frequency_hz": 5.0},
+    "encoder": {"counts_per_turn": 20000},
+    "bound": {"allowance": 0.5},  # assumed raw-row bound = noise.bound + allowance [N m]
+    "processing": {"position_cutoff_hz": 20.0, "butter_order": 4, "decimation": 10, "numtaps": 41,
+                   "fir_cutoff": 0.8, "speed_threshold": 0.05},
+    "prior": {"lower": 0.0, "upper": 2.0},
+    "estimators": {"methods": ["hull", "cgsp"], "wls": True},
+    "structure": {"regressor": "paper", "arm_com_offset": 0.0, "forearm_mass": 0.0},
+    "campaign": {"runs": 200, "noise_shapes": ["uniform", "square", "sine"], "parameter_spread": 0.3,
+                 "workers": 0, "scheduler": ""},
+    "sweep": {"factors": [0.5, 0.8, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0, 5.0]},
+    "outliers": {"count": 5, "magnitude": 6.0, "relax": 8},
+    "replay": {"enabled": True, "history_points": 10},
+    "quick": {},
+}
+
+
+def _merge(base: dict, override: dict, where: str) -> dict:
+    out = copy.deepcopy(base)
+    for key, value in override.items():
+        if key not in base:
+            raise ScenarioError(f"unknown key {where}{key!r} (known: {sorted(base)})")
+        if isinstance(base[key], dict) and key != "quick":
+            if not isinstance(value, dict):
+                raise ScenarioError(f"{where}{key} must be a table, got {type(value).__name__}")
+            out[key] = _merge(base[key], value, f"{where}{key}.")
+        else:
+            if base[key] is not None and not isinstance(value, type(base[key])) and not (
+                isinstance(base[key], float) and isinstance(value, int) and not isinstance(value, bool)
+            ):
+                raise ScenarioError(f"{where}{key} must be of type {type(base[key]).__name__}, got {value!r}")
+            out[key] = float(value) if isinstance(base[key], float) else copy.deepcopy(value)
+    return out
+
+
+def available() -> list[str]:
+    return sorted(p.stem for p in SPEC_DIR.glob("*.toml"))
+
+
+def load_spec(name_or_path: str | Path, quick: bool = False) -> dict:
+    """The merged spec of a scenario name (``paper``) or a TOML path; ``quick`` applies ``[quick]``."""
+    path = Path(name_or_path)
+    if path.suffix != ".toml":
+        path = SPEC_DIR / f"{name_or_path}.toml"
+        if not path.is_file():
+            raise ScenarioError(f"scenario must be one of {available()} or a .toml path, got {str(name_or_path)!r}")
+    elif not path.is_file():
+        raise ScenarioError(f"scenario file {str(path)!r} does not exist")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"scenario file {str(path)!r} is not valid TOML: {exc}") from exc
+    spec = _merge(DEFAULTS, raw, "")
+    if quick:
+        spec = _merge(spec, spec["quick"], "quick.")
+    spec["name"] = spec["name"] or path.stem
+    kind = spec["kind"].replace("-", "_")
+    if kind not in KINDS:
+        raise ScenarioError(f"kind must be one of {KINDS}, got {spec['kind']!r}")
+    spec["kind"] = kind
+    if spec["noise"]["bound"] < 0 or spec["bound"]["allowance"] < 0:
+        raise ScenarioError("noise.bound and bound.allowance must be >= 0 [N m]")
+    if spec["prior"]["lower"] >= spec["prior"]["upper"]:
+        raise ScenarioError(f"prior.lower must be < prior.upper, got {spec['prior']}")
+    spec["quick_applied"] = bool(quick)
+    return spec
