@@ -477,12 +477,16 @@ class VelocityFilter:
         self._qd = np.zeros(N_JOINTS) if qd0 is None else _joint_vector(qd0, "qd0").copy()
 
     def __call__(self, q) -> np.ndarray:
-        q = _joint_vector(q, "q")
+        return self.step(_joint_vector(q, "q")).copy()
+
+    def step(self, q: np.ndarray) -> np.ndarray:
+        """:meth:`__call__` without input checks, for hot loops: q must be a float (4,) array. Returns the
+        filter's state array (do not modify it)."""
         if self._q_prev is None:
             self._q_prev = q.copy()
         self._qd = self.pole * self._qd + self.gain * (q - self._q_prev)
         self._q_prev = q.copy()
-        return self._qd.copy()
+        return self._qd
 
 
 class JointController:
@@ -542,6 +546,11 @@ class JointController:
             ff = ff + self.inertia_ff * _joint_vector(qdd_ref, "qdd_ref")
         if feedforward is not None:
             ff = ff + _joint_vector(feedforward, "feedforward")
+        return self.step(q_ref, qd_ref, q, qd, ff)
+
+    def step(self, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray, qd: np.ndarray, ff: np.ndarray) -> np.ndarray:
+        """The law of :meth:`__call__` without input checks, for hot loops: float (4,) arrays, ``ff`` the
+        total feed-forward torque [N m]."""
         e = self.kp * (q_ref - q) + qd_ref - qd
         candidate = np.clip(self.integrator + 0.5 * self.ki * self.dt * (e + self._e_prev),
                             -self.tau_max, self.tau_max)

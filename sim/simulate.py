@@ -190,32 +190,38 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     controller.reset()
 
     out = {k: np.empty((n, 4)) for k in ("q", "qd", "qdd", "x", "xdd", "tau_app", "q_meas", "tau_cmd")}
-    violation = np.empty(n)
+    o_q, o_qd, o_qdd, o_x, o_xdd, o_app, o_qm, o_cmd = (out[k] for k in
+                                                       ("q", "qd", "qdd", "x", "xdd", "tau_app", "q_meas", "tau_cmd"))
+    ne = data.ne  # equality rows come first in efc and their number is fixed
+    efc = np.zeros((n, max(ne, 1)))
     qm, dm, nac = geometry.qpos_motor, geometry.dof_motor, geometry.qpos_nacelle
     lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     res = 2 * np.pi / settings.encoder_counts if settings.encoder_counts else None
     qpos, qvel, qacc, ctrl, act = data.qpos, data.qvel, data.qacc, data.ctrl, data.actuator_force
+    # the controller's unchecked core when it has one (inputs are checked once above)
+    law = getattr(controller, "step", None) or (lambda qr, vr, qq, vv, f: controller(qr, vr, qq, vv, feedforward=f))
+    step = mujoco.mj_step
     wall = time.perf_counter()
     for k in range(n):
         q_true = qpos[qm]
         q_meas = np.round(q_true / res) * res if res else q_true
-        qd_est = vfilter(q_meas)
-        tau_cmd = np.clip(controller(q_ref[k], qd_ref[k], q_meas, qd_est, feedforward=feedforward[k]), lo, hi)
+        tau_cmd = np.clip(law(q_ref[k], qd_ref[k], q_meas, vfilter.step(q_meas), feedforward[k]), lo, hi)
         ctrl[:] = tau_cmd + e[k]
-        out["q"][k] = q_true
-        out["qd"][k] = qvel[dm]
-        out["x"][k] = qpos[nac]
-        out["q_meas"][k] = q_meas
-        out["tau_cmd"][k] = tau_cmd
-        mujoco.mj_step(model, data)
-        out["qdd"][k] = qacc[dm]
-        out["xdd"][k] = qacc[nac]
-        out["tau_app"][k] = act
-        violation[k] = np.abs(data.efc_pos[: data.ne]).max() if data.ne else 0.0
+        o_q[k] = q_true
+        o_qd[k] = qvel[dm]
+        o_x[k] = qpos[nac]
+        o_qm[k] = q_meas
+        o_cmd[k] = tau_cmd
+        step(model, data)
+        o_qdd[k] = qacc[dm]
+        o_xdd[k] = qacc[nac]
+        o_app[k] = act
+        efc[k, :ne] = data.efc_pos[:ne]
         if substeps > 1:
-            mujoco.mj_step(model, data, substeps - 1)
+            step(model, data, substeps - 1)
         if progress is not None and k % 1000 == 0:
             progress(k, n)
+    violation = np.abs(efc).max(axis=1)
     out["x"] = geometry.nacelle_origin0 + (out["x"] - geometry.nacelle_qpos0)  # raw nacelle qpos -> pose
     wall = time.perf_counter() - wall
     if not np.all(np.isfinite(out["q"])):
