@@ -6,3 +6,7 @@ __all__ = ["Box", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARA
 from ident.regressor import EXTRA_NAMES, inverse_dynamics, parameter_names, regressor  # noqa: E402
 
 __all__ += ["EXTRA_NAMES", "inverse_dynamics", "parameter_names", "regressor"]
+from ident.estimate import InconsistentDataError, UnidentifiableError, estimate, min_consistent_bound  # noqa: E402
+from ident.wls import WLSResult, wls  # noqa: E402
+
+__all__ += ["InconsistentDataError", "UnidentifiableError", "WLSResult", "estimate", "min_consistent_bound", "wls"]
