@@ -34,7 +34,15 @@ import numpy as np
 
 from ident.interval import down, mid_rad, mul, point_matmul, sub, sum_down, up
 
-__all__ = ["ChebyshevResult", "HullResult", "chebyshev", "interval_hull", "safe_lower_bound", "strip_bounds"]
+__all__ = [
+    "ChebyshevResult",
+    "HullResult",
+    "chebyshev",
+    "interval_hull",
+    "safe_lower_bound",
+    "scaled_residual_upper",
+    "strip_bounds",
+]
 
 _CHUNK = 8192  # rows per block when scanning W: temporaries stay small (no page-fault cost, little memory)
 
@@ -117,6 +125,7 @@ class HullResult:
     upper: np.ndarray
     status: str
     info: dict = field(default_factory=dict)
+    points: np.ndarray | None = None  # (p, 2p) the LP solutions (float, unverified), columns min_i then max_i
 
 
 def _violations(W, x_cols, mid, inv_half):
@@ -340,7 +349,7 @@ def interval_hull(
         "converged": not todo,
         "seconds": time.perf_counter() - t0,
     }
-    return HullResult(lower=lower, upper=upper, status="infeasible" if infeasible else "ok", info=info)
+    return HullResult(lower=lower, upper=upper, status="infeasible" if infeasible else "ok", info=info, points=x_sol)
 
 
 @dataclass
@@ -354,7 +363,7 @@ class ChebyshevResult:
     info: dict = field(default_factory=dict)
 
 
-def _scaled_residual_upper(W, y, w, theta):
+def scaled_residual_upper(W, y, w, theta):
     """Rigorous upper bound of ``max_k |y_k - W_k theta| / w_k`` for a float vector theta."""
     best = 0.0
     n = W.shape[0]
@@ -391,7 +400,7 @@ def chebyshev(
     prior_lo = np.asarray(prior_lo, float)
     prior_hi = np.asarray(prior_hi, float)
     theta0 = np.clip(mid_rad(prior_lo, prior_hi)[0], prior_lo, prior_hi)
-    s_max = up(2.0 * _scaled_residual_upper(W, y, w, theta0)) + 1.0
+    s_max = up(2.0 * scaled_residual_upper(W, y, w, theta0)) + 1.0
 
     h = _new_highs(lp_tol)
     h.addVars(p + 1, np.append(prior_lo, 0.0), np.append(prior_hi, s_max))
@@ -455,7 +464,7 @@ def chebyshev(
     nz = rd != 0.0
     lower = safe_lower_bound(A[nz], lo[nz], hi[nz], np.append(prior_lo, 0.0), np.append(prior_hi, s_max), cost, rd[nz])
     theta = np.clip(theta, prior_lo, prior_hi)
-    upper = _scaled_residual_upper(W, y, w, theta)
+    upper = scaled_residual_upper(W, y, w, theta)
     info = {
         "lp_iterations": iterations,
         "working_rows": int(ws_all.size),
