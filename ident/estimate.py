@@ -238,9 +238,11 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     info: dict = {"method": method}
     info.update(identifiability(W, names, gram=G))
 
+    center = _least_squares_center(G, W, y, lo, hi)
+
     def check_consistency_by_lp():
         """Chebyshev LP with weights b: raise if S is proven empty, else record whether it is proven non-empty."""
-        ch = chebyshev(W, y, b, lo, hi)
+        ch = chebyshev(W, y, b, lo, hi, center=center)
         info["consistency_scale"] = (ch.lower, ch.upper)
         if ch.lower > 1.0:
             raise _inconsistent(W, y, b, scalar, lo, hi, ch.lower)
@@ -249,7 +251,6 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
         return ch
 
     if method == "hull":
-        center = _least_squares_center(G, W, y, lo, hi)
         res = interval_hull(W, bl, bu, lo, hi, scale=b, center=center)
         if res.status == "infeasible" or np.any(res.lower > res.upper):
             ch = check_consistency_by_lp()

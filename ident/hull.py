@@ -382,6 +382,7 @@ def chebyshev(
     prior_lo: np.ndarray,
     prior_hi: np.ndarray,
     *,
+    center: np.ndarray | None = None,
     initial_rows: int = 400,
     add_per_round: int = 50,
     violation_tol: float = 1e-12,
@@ -393,7 +394,8 @@ def chebyshev(
     W : (N, p); y : (N,); w : (N,) positive weights; prior box (p,) finite. Variables ``(theta, s)`` with
     ``s in [0, s_max]``, ``s_max`` a rigorous upper bound of ``s*`` (the scaled residual at the prior's
     midpoint, doubled), so the safe bound is valid. Rows per sample: ``W_k theta + w_k s >= y_k`` and
-    ``W_k theta - w_k s <= y_k`` (exact data, no rounding needed).
+    ``W_k theta - w_k s <= y_k`` (exact data, no rounding needed). The first working set is the rows of
+    largest scaled residual at ``center`` (e.g. least squares; default the prior's midpoint) plus spread rows.
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
@@ -417,8 +419,20 @@ def chebyshev(
         return A, lo, hi
 
     ws_mask = np.zeros(n_rows, dtype=bool)
-    ws_idx = _spread_rows(n_rows, initial_rows)
-    ws_mask[ws_idx] = True
+    ws_mask[_spread_rows(n_rows, initial_rows // 4)] = True
+    if n_rows > initial_rows:
+        c = theta0 if center is None else np.clip(np.asarray(center, float), prior_lo, prior_hi)
+        res = np.empty(n_rows)
+        for b in range(0, n_rows, _CHUNK):
+            e = min(n_rows, b + _CHUNK)
+            res[b:e] = np.abs(y[b:e] - W[b:e] @ c) / w[b:e]
+        res[ws_mask] = -np.inf
+        k = initial_rows - int(ws_mask.sum())
+        ws_mask[np.argpartition(-res, k - 1)[:k]] = True
+        del res
+    else:
+        ws_mask[:] = True
+    ws_idx = np.flatnonzero(ws_mask)
     order = [ws_idx]
     A, lo, hi = rows_for(ws_idx)
     _add_dense_rows(h, A, lo, hi)
