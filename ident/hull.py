@@ -18,6 +18,9 @@ is given by the ``2p`` linear programs ``min / max theta_i over S``. This module
   The endpoints are therefore rigorous whatever the LP tolerances; the tolerances only decide tightness.
 
 The row bounds ``y -+ b`` are rounded outward (:func:`strip_bounds`), so the LP's set contains ``S``.
+HiGHS sees a model scaled by powers of two (columns of W to unit root-mean-square, rows to unit
+half-width; HiGHS would otherwise drop entries below 1e-9), but the safe bounds are evaluated on the
+original data with the duals mapped back (``y_k = r_k y'_k``), so the scaling cannot affect rigour.
 
 :func:`chebyshev` solves ``min s  s.t. |y_k - W_k theta| <= s w_k, theta in Q`` the same way; with
 ``w = 1`` it is the smallest consistent scalar bound, with ``w = b`` it decides emptiness of ``S``
@@ -39,6 +42,7 @@ __all__ = [
     "HullResult",
     "chebyshev",
     "interval_hull",
+    "power2_scale",
     "safe_lower_bound",
     "scaled_residual_upper",
     "strip_bounds",
@@ -86,6 +90,24 @@ def safe_lower_bound(A, bl, bu, xl, xu, c, y) -> float:
     # min over r in [rlo, rhi], x in [xl, xu] of -r x: bilinear, attained at a corner
     plo, _ = mul(-rhi, -rlo, xl, xu)
     return float(sum_down(np.concatenate([rows, plo])))
+
+
+def power2_scale(v: np.ndarray) -> np.ndarray:
+    """Powers of two ``2^-round(log2 v)`` (1 where v is 0): multiplying by them is exact barring underflow."""
+    v = np.asarray(v, dtype=float)
+    out = np.ones_like(v)
+    pos = v > 0
+    out[pos] = np.ldexp(1.0, -np.rint(np.log2(v[pos])).astype(int))
+    return out
+
+
+def _column_scale(W: np.ndarray) -> np.ndarray:
+    """Power-of-two column scales that bring each column of W to a root-mean-square of about 1."""
+    ss = np.zeros(W.shape[1])
+    for s in range(0, W.shape[0], _CHUNK):
+        blk = W[s : s + _CHUNK]
+        ss += np.einsum("ij,ij->j", blk, blk)
+    return power2_scale(np.sqrt(ss / max(W.shape[0], 1)))
 
 
 def _spread_rows(n_rows: int, m: int) -> np.ndarray:
@@ -237,9 +259,17 @@ def interval_hull(
     ws_idx = first
     pool = np.sort(pool)
 
+    # HiGHS works on x' = x / d (columns to unit rms) and rows scaled by r = 1 / half-width (powers of 2)
+    d = _column_scale(W)
+    r = power2_scale(scale)
     h = _new_highs(lp_tol)
-    h.addVars(p, prior_lo, prior_hi)
-    _add_dense_rows(h, W[ws_idx], bl[ws_idx], bu[ws_idx])
+    h.addVars(p, prior_lo / d, prior_hi / d)
+
+    def add_model_rows(rows):
+        rr = r[rows]
+        _add_dense_rows(h, W[rows] * d * rr[:, None], bl[rows] * rr, bu[rows] * rr)
+
+    add_model_rows(ws_idx)
     cols = np.arange(p, dtype=np.int32)
 
     n_lp = 2 * p
@@ -260,7 +290,7 @@ def interval_hull(
         nonlocal ws_idx
         ws_mask[rows] = True
         ws_idx = np.concatenate([ws_idx, rows])
-        _add_dense_rows(h, W[rows], bl[rows], bu[rows])
+        add_model_rows(rows)
 
     def worst(v, candidates):
         bad = v > violation_tol
@@ -288,11 +318,12 @@ def interval_hull(
                 duals[j] = (ws_idx[:0], np.zeros(0))
                 x_sol[:, j] = np.clip(0.5 * (prior_lo + prior_hi), prior_lo, prior_hi)
                 return True
-            x = np.asarray(sol.col_value)
+            x = np.asarray(sol.col_value) * d
             x_sol[:, j] = x
             rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(ws_idx.size)
             nz = rd != 0.0
-            duals[j] = (ws_idx[nz], rd[nz])
+            # duals of the original rows for the original cost +-e_i: y_k = d_i r_k y'_k (any y is valid)
+            duals[j] = (ws_idx[nz], rd[nz] * r[ws_idx[nz]] * d[j % p])
             cand = pool[~ws_mask[pool]]
             if cand.size == 0:
                 return True
@@ -404,8 +435,11 @@ def chebyshev(
     theta0 = np.clip(mid_rad(prior_lo, prior_hi)[0], prior_lo, prior_hi)
     s_max = up(2.0 * scaled_residual_upper(W, y, w, theta0)) + 1.0
 
+    # HiGHS works on theta' = theta / d and rows scaled by r = 1 / w (powers of two), see interval_hull
+    d = np.append(_column_scale(W), 1.0)
+    r = power2_scale(w)
     h = _new_highs(lp_tol)
-    h.addVars(p + 1, np.append(prior_lo, 0.0), np.append(prior_hi, s_max))
+    h.addVars(p + 1, np.append(prior_lo, 0.0) / d, np.append(prior_hi, s_max) / d)
     cost = np.zeros(p + 1)
     cost[p] = 1.0
     h.changeColsCost(p + 1, np.arange(p + 1, dtype=np.int32), cost)
@@ -417,6 +451,11 @@ def chebyshev(
         lo = np.concatenate([y[idx], np.full(idx.size, -np.inf)])
         hi = np.concatenate([np.full(idx.size, np.inf), y[idx]])
         return A, lo, hi
+
+    def add_model_rows(idx):
+        A, lo, hi = rows_for(idx)
+        rr = np.concatenate([r[idx], r[idx]])
+        _add_dense_rows(h, A * d * rr[:, None], lo * rr, hi * rr)
 
     ws_mask = np.zeros(n_rows, dtype=bool)
     ws_mask[_spread_rows(n_rows, initial_rows // 4)] = True
@@ -434,8 +473,7 @@ def chebyshev(
         ws_mask[:] = True
     ws_idx = np.flatnonzero(ws_mask)
     order = [ws_idx]
-    A, lo, hi = rows_for(ws_idx)
-    _add_dense_rows(h, A, lo, hi)
+    add_model_rows(ws_idx)
     iterations = 0
     rounds = 0
     while True:
@@ -445,7 +483,7 @@ def chebyshev(
         sol = h.getSolution()
         if h.getModelStatus() != _OPTIMAL or not sol.value_valid:
             raise RuntimeError(f"HiGHS failed on the Chebyshev LP: {h.modelStatusToString(h.getModelStatus())}")
-        x = np.asarray(sol.col_value)
+        x = np.asarray(sol.col_value) * d
         theta, s = x[:p], x[p]
         # scaled residuals of all rows at theta, block by block
         worst = np.empty(n_rows)
@@ -460,8 +498,7 @@ def chebyshev(
             bad = bad[np.argpartition(-worst[bad], add_per_round - 1)[:add_per_round]]
         ws_mask[bad] = True
         order.append(bad)
-        A, lo, hi = rows_for(bad)
-        _add_dense_rows(h, A, lo, hi)
+        add_model_rows(bad)
 
     ws_all = np.concatenate(order)
     rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(2 * ws_all.size)
@@ -475,6 +512,7 @@ def chebyshev(
     A = np.vstack(A_all)
     lo = np.concatenate(lo_all)
     hi = np.concatenate(hi_all)
+    rd = rd * np.concatenate([np.concatenate([r[blk], r[blk]]) for blk in order])  # duals of the unscaled rows
     nz = rd != 0.0
     lower = safe_lower_bound(A[nz], lo[nz], hi[nz], np.append(prior_lo, 0.0), np.append(prior_hi, s_max), cost, rd[nz])
     theta = np.clip(theta, prior_lo, prior_hi)

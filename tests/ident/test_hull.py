@@ -133,6 +133,27 @@ def test_constraint_generation_on_many_rows_matches_linprog():
         assert abs(box.lower[i] - lp_lo[i]) < 1e-9 and abs(box.upper[i] - lp_hi[i]) < 1e-9
 
 
+def test_extreme_column_scales_are_handled():
+    """Columns scaled by 1e-10 and 1e8 (HiGHS drops matrix entries below 1e-9 unless the model is scaled).
+
+    Oracle: linprog on the well-scaled problem W D, theta' = theta / D (D powers of ten), mapped back.
+    """
+    rng = np.random.default_rng(12)
+    n, p = 300, 3
+    D = np.array([1.0, 1e-10, 1e8])
+    Ws = rng.standard_normal((n, p))
+    theta_s = np.array([1.0, 1.0, 1.0])
+    y = Ws @ theta_s + rng.uniform(-0.9, 0.9, n)
+    W = Ws / D  # column j of W is column j of Ws divided by D_j; theta = theta_s * D
+    theta = theta_s * D
+    lo, hi = theta - D, theta + D
+    box = ident.estimate(W, y, 1.0, (lo, hi), method="hull")
+    s_lo, s_hi, _ = linprog_endpoints(Ws, y, np.ones(n), lo / D, hi / D)
+    assert box.contains(theta).all() and box.info["lp_failures"] == []
+    np.testing.assert_allclose(box.lower / D, s_lo, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(box.upper / D, s_hi, rtol=0, atol=1e-8)
+
+
 # ------------------------------------------------------------------------------- exact (rational) oracles
 def exact_solve(rows, rhs):
     M = fmpq_mat(len(rows), len(rows), [v for r in rows for v in r])

@@ -52,6 +52,7 @@ def interval_arrays(n: int):
 
 
 # ------------------------------------------------------------------------------------------ up / down
+@settings(deadline=None)  # no wall-clock deadline: the 2-core test machine is shared
 @given(ANY)
 def test_up_down_bracket_the_neighbouring_floats(x):
     assert iv.up(x) >= np.nextafter(x, np.inf) > x
@@ -59,6 +60,7 @@ def test_up_down_bracket_the_neighbouring_floats(x):
 
 
 # ----------------------------------------------------------------------------------------- elementwise
+@settings(deadline=None)
 @given(interval_arrays(4), interval_arrays(4))
 def test_add_sub_mul_contain_every_corner_exactly(a, b):
     (alo, ahi), (blo, bhi) = a, b
@@ -74,6 +76,7 @@ def test_add_sub_mul_contain_every_corner_exactly(a, b):
                 assert inside(mlo[k], q(x) * q(y), mhi[k])
 
 
+@settings(deadline=None)
 @given(interval_arrays(3), interval_arrays(3))
 def test_div_contains_every_corner_exactly(a, b):
     (alo, ahi), (blo, bhi) = a, b
@@ -93,6 +96,7 @@ def test_div_by_an_interval_containing_zero_raises():
 
 
 # ------------------------------------------------------------------------------------------ reductions
+@settings(deadline=None)
 @given(hnp.arrays(float, st.integers(1, 40), elements=ANY))
 def test_sums_bracket_the_exact_sum(v):
     exact = fmpq(0)
