@@ -210,3 +210,16 @@ def test_integer_and_fortran_ordered_input_is_accepted():
     y = (W @ np.ones(3)).astype(np.int64)
     box = ident.estimate(W, y, 1, (np.zeros(3), 2 * np.ones(3)))
     assert box.contains(np.ones(3)).all()
+
+
+def test_estimators_import_neither_sim_nor_mujoco():
+    """DESIGN.md: the estimators work on any (W, y) and never import the simulator (static check)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(ident.__file__).parent
+    for name in ("interval", "hull", "cgsp", "wls", "estimate"):
+        tree = ast.parse((root / f"{name}.py").read_text())
+        modules = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        modules |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        assert not modules & {"sim", "mujoco"}, name
