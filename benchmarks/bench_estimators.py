@@ -1,6 +1,6 @@
 """Speed and tightness of the estimators, as ratios to numpy.linalg.lstsq on the same data in the same run.
 
-    python benchmarks/bench_estimators.py [--sizes 4000 40000 400000] [--big 1000000] [--repeats 3]
+    python benchmarks/bench_estimators.py [--sizes 4000 40000 400000] [--big 1000000] [--repeats 3] [--threads 1]
 
 Synthetic, well-conditioned data: W (N, 14) standard normal, theta_true uniform in [0.5, 1.5], noise uniform
 in [-1, 1], bound 1, prior [0, 2]^14. For each N: the median time of each method over ``--repeats`` runs
@@ -20,7 +20,12 @@ import time
 import tracemalloc
 from pathlib import Path
 
-import numpy as np
+if "--threads" in sys.argv:  # must be set before numpy loads its BLAS
+    _n = sys.argv[sys.argv.index("--threads") + 1]
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[_var] = _n
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -105,6 +110,8 @@ def main(argv=None) -> int:
     ap.add_argument("--big", type=int, default=1_000_000, help="rows for the hull-only run (0 to skip)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="BLAS threads (default: the library's own choice); 1 gives steadier timings on a busy machine")
     args = ap.parse_args(argv)
 
     load_before = os.getloadavg()[0]
