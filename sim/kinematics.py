@@ -42,7 +42,7 @@ def _check_geometry(geometry) -> None:
 def nacelle_points(geometry: H4Geometry, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A_i (n, 4, 3) and DC_i (n, 4, 3) for poses x (n, 4)."""
     rot = _rot_z(x[:, 3])  # (n, 3, 3)
-    dc = np.einsum("nab,ib->nia", rot, geometry.bar_offset)
+    dc = np.swapaxes(rot @ geometry.bar_offset.T, 1, 2)  # (n, 4, 3): Rz(theta) bar_offset_i
     a = x[:, None, :3] + dc + geometry.attach_offset[None]
     return a, dc
 
@@ -204,7 +204,7 @@ def _jacobian_dot(geometry: H4Geometry, jac: Jacobians, qd: np.ndarray) -> np.nd
     jxd[..., 3] = (dcd[..., 0] * jac.AB[..., 1] + jac.DC[..., 0] * abd[..., 1]
                    - dcd[..., 1] * jac.AB[..., 0] - jac.DC[..., 1] * abd[..., 0])
     jqd = np.einsum("ia,nia->ni", geometry.motor_axis, np.cross(bd, jac.AB) + np.cross(jac.PB, abd))
-    rhs = jqd[:, :, None] * np.eye(4)[None] - np.einsum("nab,nbc->nac", jxd, jac.J)
+    rhs = jqd[:, :, None] * np.eye(4)[None] - jxd @ jac.J
     return np.linalg.solve(jac.Jx, rhs)
 
 

@@ -32,21 +32,16 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ident import NOMINAL_PARAMETERS as _NOMINAL
 from ident import PARAMETER_NAMES
 
-#: Nominal parameters by name (see the module docstring for the source of each value).
-NOMINAL_PARAMETERS: dict[str, float] = {
-    "Imot1": 0.012, "Imot2": 0.012, "Imot3": 0.012, "Imot4": 0.012,  # paper Table 1, a priori [kg m^2]
-    "Mnac": 1.0,  # paper Table 1, a priori [kg]
-    "Ibc": 0.003,  # paper Table 2 (WLS) [kg m^2]
-    "Fv1": 0.16, "Fv2": 0.06, "Fv3": 0.09, "Fv4": 0.09,  # paper Table 2, rounded [N m s/rad]
-    "Fs1": 1.15, "Fs2": 1.10, "Fs3": 0.72, "Fs4": 0.99,  # paper Table 2, rounded [N m]
-}
+#: Nominal parameters by name: ``ident.NOMINAL_PARAMETERS`` (its source is documented there).
+NOMINAL_PARAMETERS: dict[str, float] = dict(zip(PARAMETER_NAMES, _NOMINAL))
 
 
 def nominal_parameters() -> np.ndarray:
     """The nominal parameter vector (14,) in :data:`ident.PARAMETER_NAMES` order (SI units)."""
-    return np.array([NOMINAL_PARAMETERS[name] for name in PARAMETER_NAMES])
+    return np.asarray(_NOMINAL, dtype=float)
 
 
 def as_theta(theta_nominal) -> np.ndarray:
