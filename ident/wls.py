@@ -66,11 +66,13 @@ def _null_names(V: np.ndarray, weak: np.ndarray, names) -> tuple[str, ...]:
     return tuple(names[j] for j in np.flatnonzero(share > 0.01))
 
 
-def wls(W, y, joints: int = 4, *, names=None) -> WLSResult:
+def wls(W, y, joints: int = 4, *, names=None, joint_of_row=None) -> WLSResult:
     """Gautier's weighted least squares with %sigma (see module docstring).
 
     W : (m, p) regressor with ``m = joints * n_samples`` rows stacked sample-major; y : (m,) torques;
-    joints : rows per sample (4 for the H4); names : p parameter names (default :func:`default_names`).
+    joints : rows per sample (4 for the H4); names : p parameter names (default :func:`default_names`);
+    joint_of_row : optional (m,) joint index of each row (0..joints-1), for equations whose rows were
+    selected individually (e.g. ``ident.processing.Equation.joint``); then m need not be a multiple of joints.
     Raises ``ValueError`` on bad input (shapes, non-finite values, too few rows per joint, a joint whose
     OLS residual is at rounding level, below 1e-12 of its rms torque, so its weight is undefined) and :class:`UnidentifiableError` naming the
     parameters the data do not determine when W (weighted, column-equilibrated) is rank-deficient.
@@ -79,8 +81,17 @@ def wls(W, y, joints: int = 4, *, names=None) -> WLSResult:
     m, p = W.shape
     if isinstance(joints, bool) or not isinstance(joints, (int, np.integer)):
         raise TypeError(f"joints must be an int >= 1, got {type(joints).__name__}")
-    if joints < 1 or m % joints:
-        raise ValueError(f"W must have a multiple of joints={joints} rows (sample k, joint i -> row {joints}k + i), got {m}")
+    if joint_of_row is None:
+        if joints < 1 or m % joints:
+            raise ValueError(f"W must have a multiple of joints={joints} rows (sample k, joint i -> row {joints}k + i), "
+                             f"got {m}; pass joint_of_row for individually selected rows")
+        joint_of_row = np.tile(np.arange(joints), m // joints)
+    else:
+        joint_of_row = np.asarray(joint_of_row)
+        if joint_of_row.shape != (m,) or not np.issubdtype(joint_of_row.dtype, np.integer) \
+                or joint_of_row.min(initial=0) < 0 or joint_of_row.max(initial=0) >= joints:
+            raise ValueError(f"joint_of_row must be ({m},) integers in [0, {joints}), got shape {joint_of_row.shape}, "
+                             f"dtype {joint_of_row.dtype}")
     if m <= p:
         raise ValueError(f"W must have shape (m, p) with m > p for a variance estimate, got {W.shape}")
     names = default_names(p) if names is None else tuple(names)
@@ -89,7 +100,7 @@ def wls(W, y, joints: int = 4, *, names=None) -> WLSResult:
 
     sigma = np.empty(joints)
     for j in range(joints):
-        Wj, yj = W[j::joints], y[j::joints]
+        Wj, yj = W[joint_of_row == j], y[joint_of_row == j]
         th_j, _, rank_j, _ = np.linalg.lstsq(Wj, yj, rcond=None)
         dof_j = Wj.shape[0] - int(rank_j)
         if dof_j < 1:
@@ -102,7 +113,7 @@ def wls(W, y, joints: int = 4, *, names=None) -> WLSResult:
                 "weight 1/sigma is undefined (noise-free data?)"
             )
 
-    w = np.tile(1.0 / sigma, m // joints)
+    w = (1.0 / sigma)[joint_of_row]
     Wt = W * w[:, None]
     Yt = y * w
     d = np.sqrt(np.einsum("ij,ij->j", Wt, Wt))

@@ -182,5 +182,5 @@ def estimate_boxes(run: ExperimentRun) -> None:
         run.seconds[method] = time.perf_counter() - t0
     if run.spec["estimators"]["wls"]:
         t0 = time.perf_counter()
-        run.wls = ident.wls(eq.W, eq.y, joints=4)
+        run.wls = ident.wls(eq.W, eq.y, joints=4, names=eq.names, joint_of_row=eq.joint)
         run.seconds["wls"] = time.perf_counter() - t0

@@ -40,7 +40,7 @@ def identify_csv(path, bound: float, method: str = "hull", prior=(0.0, 2.0), mod
     }
     result["min_consistent_bound"] = float(ident.min_consistent_bound(eq.W, eq.y, box_prior))
     if method == "wls":
-        w = ident.wls(eq.W, eq.y, joints=4)
+        w = ident.wls(eq.W, eq.y, joints=4, names=eq.names, joint_of_row=eq.joint)
         result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
                          "rel_std_percent": np.asarray(w.rel_std_percent).tolist()}
     else:

@@ -136,6 +136,7 @@ def plot_boxes(result: dict, path: Path, title: str | None = None) -> None:
     ax.axvline(1.0, color="crimson", lw=1.5, label="truth")
     ax.set_yticks(y, names)
     ax.set_xscale("symlog", linthresh=0.1)
+    ax.set_xlim(left=0.0)
     ax.set_xlabel("box / true value (symlog)")
     ax.set_title(title or f"{result['scenario']}: boxes against the truth")
     ax.legend(loc="lower right", fontsize=8)

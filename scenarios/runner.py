@@ -128,7 +128,7 @@ def _sweep_bounds(run: ExperimentRun) -> np.ndarray:
     factors = np.asarray(run.spec["sweep"]["factors"], dtype=float)
     grid = np.concatenate([factors * noise_level, [m_star * 0.9, m_star * 1.0001, float(np.abs(run.residual).max()),
                                                    float(eq.bound.max())]])
-    return np.unique(np.round(grid[grid > 0], 12))
+    return np.unique(np.round(grid[grid > 0], 9))
 
 
 def _prior_bound(spec: dict, seed: int, out: Path, progress) -> dict:

@@ -25,7 +25,7 @@ DEFAULTS: dict = {
     "description": "",
     "seed": 0,
     "model": "",  # empty: models/h4.xml
-    "trajectory": {"kind": "fourier", "duration": 10.0, "harmonics": 5, "base_hz": 0.2, "optimise": True},
+    "trajectory": {"kind": "fourier", "duration": 10.0, "harmonics": 5, "base_hz": 0.5, "optimise": True},
     "controller": {"bandwidth_hz": 15.0, "feedforward": True},
     "noise": {"shape": "uniform", "bound": 1.0, "frequency_hz": 5.0},
     "encoder": {"counts_per_turn": 20000},

@@ -110,3 +110,26 @@ def test_noise_free_joint_has_no_weight():
     W = np.random.default_rng(0).standard_normal((40, 2))
     with pytest.raises(ValueError, match="joint 0: the OLS residual"):
         ident.wls(W, W @ np.array([1.0, 2.0]), joints=4)
+
+
+def test_joint_of_row_matches_the_stacked_layout_and_allows_dropped_rows():
+    """Rows labelled by joint give the same estimate as the 4k + i stacking; dropping rows is then allowed
+    and equals the stacked fit on the rows kept (oracle: the same computation with explicit weights)."""
+    rng = np.random.default_rng(9)
+    W = rng.normal(size=(400, 6))
+    y = W @ rng.uniform(0.5, 2.0, 6) + rng.normal(scale=0.1, size=400) * np.tile([1.0, 2.0, 0.5, 1.5], 100)
+    labels = np.tile(np.arange(4), 100)
+    a = ident.wls(W, y, joints=4)
+    b = ident.wls(W, y, joints=4, joint_of_row=labels)
+    np.testing.assert_allclose(a.theta, b.theta, rtol=1e-12)
+    keep = rng.random(400) > 0.1
+    c = ident.wls(W[keep], y[keep], joints=4, joint_of_row=labels[keep])
+    sig = np.array([np.sqrt(np.sum((y[keep][labels[keep] == j] - W[keep][labels[keep] == j]
+                                    @ np.linalg.lstsq(W[keep][labels[keep] == j], y[keep][labels[keep] == j],
+                                                      rcond=None)[0]) ** 2) / (np.sum(labels[keep] == j) - 6))
+                    for j in range(4)])
+    w = 1.0 / sig[labels[keep]]
+    ref = np.linalg.lstsq(W[keep] * w[:, None], y[keep] * w, rcond=None)[0]
+    np.testing.assert_allclose(c.theta, ref, rtol=1e-10)
+    with pytest.raises(ValueError, match="joint_of_row must be"):
+        ident.wls(W, y, joints=4, joint_of_row=labels[:-1])
