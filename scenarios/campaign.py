@@ -141,7 +141,7 @@ def write_report(result: dict, runs: list[dict], out: Path) -> None:
         rel = [np.asarray(r["methods"][name]["width"]) / np.asarray(r["true"]) for r in runs
                if r["methods"][name].get("status") == "ok"]
         if rel:
-            ax.boxplot(np.array(rel), tick_labels=names, vert=True)
+            ax.boxplot(np.array(rel), tick_labels=names)
         ax.set_yscale("log")
         ax.set_title(f"{name}: relative widths over {len(rel)} runs, {m['misses']} miss(es)")
         ax.tick_params(axis="x", rotation=60)

@@ -125,19 +125,24 @@ def plot_boxes(result: dict, path: Path, title: str | None = None) -> None:
     names, true = result["parameters"], np.asarray(result["true"])
     methods = {k: v for k, v in result["methods"].items() if v.get("status") == "ok"}
     colours = {"hull": "tab:blue", "cgsp": "tab:orange", "relaxed": "tab:green", "interval": "tab:purple"}
+    # each row in units of its true value; a parameter whose truth is 0 in units of its prior's upper end
+    prior_hi = np.asarray(result.get("prior", {}).get("upper", np.ones_like(true)))
+    scale = np.where(true != 0, np.abs(true), np.where(prior_hi > 0, prior_hi, 1.0))
+    labels = [n if t != 0 else f"{n} (/prior)" for n, t in zip(names, true)]
     fig, ax = plt.subplots(figsize=(9, 0.45 * len(names) + 1.5))
     y = np.arange(len(names))[::-1]
     offsets = np.linspace(-0.2, 0.2, max(len(methods), 1))
     for (name, m), off in zip(methods.items(), offsets):
-        lo, hi = np.asarray(m["lower"]) / true, np.asarray(m["upper"]) / true
+        lo, hi = np.asarray(m["lower"]) / scale, np.asarray(m["upper"]) / scale
         ax.hlines(y + off, lo, hi, colors=colours.get(name, "tab:gray"), lw=4, label=name)
     if "wls" in result:
-        ax.plot(np.asarray(result["wls"]["theta"]) / true, y, "k|", ms=12, label="WLS")
-    ax.axvline(1.0, color="crimson", lw=1.5, label="truth")
-    ax.set_yticks(y, names)
+        ax.plot(np.asarray(result["wls"]["theta"]) / scale, y, "k|", ms=12, label="WLS")
+    ax.plot(true / scale, y, "d", color="crimson", ms=6, label="truth")
+    ax.axvline(1.0, color="crimson", lw=0.8, alpha=0.5)
+    ax.set_yticks(y, labels)
     ax.set_xscale("symlog", linthresh=0.1)
     ax.set_xlim(left=0.0)
-    ax.set_xlabel("box / true value (symlog)")
+    ax.set_xlabel("box / true value (symlog); rows marked /prior: box / prior upper bound")
     ax.set_title(title or f"{result['scenario']}: boxes against the truth")
     ax.legend(loc="lower right", fontsize=8)
     ax.grid(axis="x", alpha=0.3)
