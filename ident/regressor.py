@@ -88,11 +88,12 @@ def regressor(geometry, q, qd, qdd, structure: str = "paper", x=None, xdd=None) 
     p = len(parameter_names(structure))
     w = np.zeros((n, 4, p))
     eye = np.eye(4)[None]
-    w[..., 0:4] = eye * qdd[:, :, None]
-    w[..., 4] = np.einsum("nai,na->ni", jac.J[:, :3, :], xdd[:, :3] - g4[None, :3])
+    joint = np.arange(4)
+    w[:, joint, joint] = qdd  # Imot_i qdd_i on row i
+    w[..., 4] = (jac.J[:, :3, :].transpose(0, 2, 1) @ (xdd[:, :3] - g4[:3])[..., None])[..., 0]
     w[..., 5] = jac.J[:, 3, :] * xdd[:, 3, None]
-    w[..., 6:10] = eye * qd[:, :, None]
-    w[..., 10:14] = eye * np.sign(qd)[:, :, None]
+    w[:, joint, 6 + joint] = qd
+    w[:, joint, 10 + joint] = np.sign(qd)
     if structure == "extended":
         u = geometry.motor_axis
         # arm gravity: d/dq of -MXa g . (position of the arm's centre of mass along e_i) per unit MXa

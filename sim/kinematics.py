@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.model import H4Geometry, _rot_z
+from sim.model import H4Geometry
 
 
 class KinematicsError(ValueError):
@@ -41,8 +41,12 @@ def _check_geometry(geometry) -> None:
 
 def nacelle_points(geometry: H4Geometry, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A_i (n, 4, 3) and DC_i (n, 4, 3) for poses x (n, 4)."""
-    rot = _rot_z(x[:, 3])  # (n, 3, 3)
-    dc = np.swapaxes(rot @ geometry.bar_offset.T, 1, 2)  # (n, 4, 3): Rz(theta) bar_offset_i
+    c, s = np.cos(x[:, 3])[:, None], np.sin(x[:, 3])[:, None]
+    b = geometry.bar_offset
+    dc = np.empty((x.shape[0], 4, 3))
+    dc[..., 0] = c * b[:, 0] - s * b[:, 1]  # Rz(theta) bar_offset_i
+    dc[..., 1] = s * b[:, 0] + c * b[:, 1]
+    dc[..., 2] = b[:, 2]
     a = x[:, None, :3] + dc + geometry.attach_offset[None]
     return a, dc
 
@@ -104,7 +108,8 @@ class Jacobians:
     DC: np.ndarray
 
 
-def _jacobians(geometry: H4Geometry, q: np.ndarray, x: np.ndarray) -> Jacobians:
+def _jx_jq(geometry: H4Geometry, q: np.ndarray, x: np.ndarray):
+    """Jx (n, 4, 4), Jq (n, 4) and the vectors AB, PB, DC (n, 4, 3) of eqs. 11-12."""
     b_pts = arm_tips(geometry, q)
     a_pts, dc = nacelle_points(geometry, x)
     ab = b_pts - a_pts
@@ -113,6 +118,11 @@ def _jacobians(geometry: H4Geometry, q: np.ndarray, x: np.ndarray) -> Jacobians:
     jx[..., :3] = ab
     jx[..., 3] = dc[..., 0] * ab[..., 1] - dc[..., 1] * ab[..., 0]
     jq = np.einsum("ia,nia->ni", geometry.motor_axis, np.cross(pb, ab))
+    return jx, jq, ab, pb, dc
+
+
+def _jacobians(geometry: H4Geometry, q: np.ndarray, x: np.ndarray) -> Jacobians:
+    jx, jq, ab, pb, dc = _jx_jq(geometry, q, x)
     j = np.linalg.solve(jx, jq[:, :, None] * np.eye(4)[None])
     return Jacobians(Jx=jx, Jq=jq, J=j, AB=ab, PB=pb, DC=dc)
 
@@ -141,7 +151,16 @@ def forward_kinematics(geometry: H4Geometry, q, x0=None, tol: float = 1e-13, max
     _check_geometry(geometry)
     q2, single = _as_samples("q", q)
     n = q2.shape[0]
-    x = np.tile(geometry.x_home, (n, 1)) if x0 is None else np.array(np.broadcast_to(_as_samples("x0", x0)[0], (n, 4)))
+    if x0 is None:
+        # start from the home pose's linearisation x_home + J_home (q - q_home), or from home where that
+        # first guess is out of reach
+        home = geometry.x_home[None]
+        q_home = _ik(geometry, home)[0]
+        x = home + (q2 - q_home) @ _jacobians(geometry, q_home, home).J[0].T
+        out_of_reach = ~np.all(np.abs(_ik(geometry, x)[1]) <= 1.0, axis=1)
+        x[out_of_reach] = geometry.x_home
+    else:
+        x = np.array(np.broadcast_to(_as_samples("x0", x0)[0], (n, 4)))
     qn, ratio = _ik(geometry, x)
     if np.any(np.abs(ratio) > 1.0):
         raise KinematicsError("x0 must be inside the workspace (every chain in reach)")
@@ -152,8 +171,8 @@ def forward_kinematics(geometry: H4Geometry, q, x0=None, tol: float = 1e-13, max
         if not active.any():
             break
         idx = np.flatnonzero(active)
-        jac = _jacobians(geometry, qn[idx], x[idx])
-        step = np.einsum("nab,nb->na", jac.J, err[idx])
+        jx, jq = _jx_jq(geometry, qn[idx], x[idx])[:2]
+        step = np.linalg.solve(jx, (jq * err[idx])[..., None])[..., 0]  # J (q - q_n) = Jx^-1 Jq (q - q_n)
         scale = np.ones(idx.size)
         for _halving in range(30):
             trial = x[idx] + scale[:, None] * step
