@@ -191,8 +191,10 @@ def plot_prior_bound(result: dict, path: Path) -> None:
                 ws.append((np.asarray(m["upper"]) - np.asarray(m["lower"])) / true)
         if xs:
             ws = np.array(ws)
+            colours = plt.get_cmap("tab20").colors
             for j, name in enumerate(names):
-                ax.plot(xs, ws[:, j], marker=".", lw=1, label=name)
+                ax.plot(xs, ws[:, j], marker=".", lw=1, label=name, color=colours[j % len(colours)],
+                        ls="-" if j < 10 else "--")
         pts = result["points"]
         ax.axvline(pts["min_consistent_bound"], color="k", ls=":", label="min consistent bound")
         ax.axvline(pts["oracle_residual"], color="crimson", ls="--", label="oracle residual")

@@ -146,3 +146,14 @@ def test_dask_address_that_does_not_answer(tmp_path):
     with pytest.raises(ScenarioError, match="does not answer"):
         run_scenario("enclosure", quick=True, out=out, scheduler="tcp://127.0.0.1:9")
     assert not (out / "result.json").exists()
+
+
+def test_enclosure_on_a_dask_cluster(tmp_path):
+    """The same campaign code on a Dask scheduler (a local cluster here; a remote address works the same)."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
+        spec_runs = run_scenario("enclosure", quick=True, out=tmp_path / "dask", scheduler=cluster.scheduler_address)
+    assert spec_runs["runs"] == 4
+    assert spec_runs["methods"]["hull"]["misses"] == 0
+    assert len(list((tmp_path / "dask" / "runs").glob("*.json"))) == 4
