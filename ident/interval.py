@@ -118,15 +118,18 @@ def neg(alo, ahi):
     return -np.asarray(ahi), -np.asarray(alo)
 
 
+def _endpoint_hull(op, alo, ahi, blo, bhi):
+    """Outward-rounded hull of ``op`` at the four endpoint pairs (exact for ``*`` and for ``/`` by an
+    interval without zero, where the extremes sit at endpoints)."""
+    r1, r2, r3, r4 = op(alo, blo), op(alo, bhi), op(ahi, blo), op(ahi, bhi)
+    lo = np.minimum(np.minimum(r1, r2), np.minimum(r3, r4))
+    hi = np.maximum(np.maximum(r1, r2), np.maximum(r3, r4))
+    return down(lo), up(hi)
+
+
 def mul(alo, ahi, blo, bhi):
     """``[a] * [b]`` elementwise (endpoint products, outward rounded). Bounds must be finite."""
-    p1 = np.multiply(alo, blo)
-    p2 = np.multiply(alo, bhi)
-    p3 = np.multiply(ahi, blo)
-    p4 = np.multiply(ahi, bhi)
-    lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
-    hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
-    return down(lo), up(hi)
+    return _endpoint_hull(np.multiply, alo, ahi, blo, bhi)
 
 
 def div(alo, ahi, blo, bhi):
@@ -135,13 +138,7 @@ def div(alo, ahi, blo, bhi):
     bhi = np.asarray(bhi, dtype=float)
     if np.any((blo <= 0.0) & (bhi >= 0.0)):
         raise ZeroDivisionError("interval division: the divisor contains zero")
-    q1 = np.divide(alo, blo)
-    q2 = np.divide(alo, bhi)
-    q3 = np.divide(ahi, blo)
-    q4 = np.divide(ahi, bhi)
-    lo = np.minimum(np.minimum(q1, q2), np.minimum(q3, q4))
-    hi = np.maximum(np.maximum(q1, q2), np.maximum(q3, q4))
-    return down(lo), up(hi)
+    return _endpoint_hull(np.divide, alo, ahi, blo, bhi)
 
 
 def intersect(alo, ahi, blo, bhi):
