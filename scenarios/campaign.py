@@ -22,8 +22,9 @@ from scenarios.spec import ScenarioError
 METHODS_SUMMARY_KEYS = ("all_enclosed", "width", "seconds", "status")
 
 
-def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
-    """One run of a campaign (a top-level function: picklable for process pools and Dask)."""
+def campaign_experiment(spec: dict, index: int, base_seed: int):
+    """The experiment of run ``index`` of a campaign: seed ``base_seed + index``, the index's noise shape,
+    true parameters randomised with that seed. Returns (ExperimentRun, noise shape)."""
     from scenarios.experiment import run_experiment
 
     camp = spec["campaign"]
@@ -34,10 +35,34 @@ def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
     path = spec["model"] or None
     model = sim.randomised_model(seed, camp["parameter_spread"], path) if camp["parameter_spread"] > 0 \
         else sim.load_model(path)
-    run = run_experiment(spec_i, seed, model=model, model_path=path)
+    return run_experiment(spec_i, seed, model=model, model_path=path), spec_i["noise"]["shape"]
+
+
+def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
+    """One run of a campaign (a top-level function: picklable for process pools and Dask)."""
+    run, shape = campaign_experiment(spec, index, base_seed)
     result = run.result()
     result["index"] = index
-    result["noise_shape"] = spec_i["noise"]["shape"]
+    result["noise_shape"] = shape
+    return result
+
+
+def replay_one(spec: dict, index: int, base_seed: int, out: Path, progress) -> dict:
+    """Re-run run ``index`` of a campaign alone and write a full run folder (dataset, truth, report, replay),
+    e.g. to inspect a miss; ``out`` is an atomic temporary folder."""
+    from scenarios import report
+    from scenarios.runner import _save_run_files
+
+    progress(f"run {index}", 0, 1)
+    spec = copy.deepcopy(spec)
+    spec["replay"]["enabled"] = True
+    run, shape = campaign_experiment(spec, index, base_seed)
+    _save_run_files(run, out, progress)
+    result = run.result()
+    result["index"] = index
+    result["noise_shape"] = shape
+    report.plot_boxes(result, out / "boxes.png")
+    report.write_paper_report(result, out, extra=f"Run {index} of campaign `{spec['name']}` (noise {shape}).")
     return result
 
 
@@ -157,7 +182,7 @@ def write_report(result: dict, runs: list[dict], out: Path) -> None:
     for name, m in result["methods"].items():
         lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']}; misses where the bound covered the "
                      f"residual (must be none): {m['misses_with_bound_covering_residual']}; median {m['seconds']:.3g} s")
-    lines += ["", "Replay a miss: `h4bench run enclosure --seed S` runs seed S alone is not the same; use "
-              "`h4bench run paper --seed S` with the same noise shape to inspect one experiment.", "",
+    lines += ["", f"Inspect one run (a miss, say) with its dataset and Rerun replay: `h4bench run {result['scenario']} "
+              f"--seed {result['seed']} --only INDEX` (run INDEX has seed {result['seed']} + INDEX).", "",
               "Plot: `widths.png`."]
     atomic_write_bytes(out / "report.md", "\n".join(lines).encode())

@@ -104,6 +104,7 @@ def run(
     as_json: bool = typer.Option(False, "--json", help="print result.json instead of the table"),
     scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address for campaigns (host:port)"),
     workers: Optional[int] = typer.Option(None, help="local worker processes for campaigns"),
+    only: Optional[int] = typer.Option(None, help="campaigns: re-run this run index alone, with its replay"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
     from scenarios.runner import run_scenario
@@ -111,7 +112,7 @@ def run(
     try:
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
-                                  scheduler=scheduler, workers=workers)
+                                  scheduler=scheduler, workers=workers, only=only)
     except ValueError as exc:  # ScenarioError, ModelError, DatasetError, InconsistentDataError, ...
         _fail(str(exc))
     if as_json:

@@ -16,7 +16,7 @@ import ident
 import sim
 from scenarios import report
 from scenarios.experiment import ExperimentRun, estimate_boxes, run_experiment
-from scenarios.spec import load_spec
+from scenarios.spec import ScenarioError, load_spec
 from sim.dataset import _json_default, atomic_write_bytes
 
 RUNS_DIR = Path("runs")
@@ -55,11 +55,12 @@ def _noop(stage: str, done: int = 0, total: int = 0) -> None:
 
 def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | None = None,
                  out: str | Path | None = None, quick: bool = False, progress=None,
-                 scheduler: str | None = None, workers: int | None = None) -> dict:
+                 scheduler: str | None = None, workers: int | None = None, only: int | None = None) -> dict:
     """Run scenario ``name`` (or a TOML path) and write its folder; returns the result dict.
 
     progress : optional callable(stage, done, total) for a progress display; scheduler, workers : where a
-    campaign runs (a Dask scheduler address, or the size of the local process pool).
+    campaign runs (a Dask scheduler address, or the size of the local process pool); only : for a campaign,
+    re-run that one run index alone into ``<out>/run-<index>/`` with its dataset, report and replay.
     """
     spec = load_spec(name, quick=quick)
     if scheduler:
@@ -75,9 +76,18 @@ def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | 
     progress = progress or _noop
     started = time.perf_counter()
     if spec["kind"] == "enclosure":
-        from scenarios.campaign import run_campaign
+        from scenarios.campaign import replay_one, run_campaign
 
-        return run_campaign(spec, seed, out, progress)
+        if only is None:
+            return run_campaign(spec, seed, out, progress)
+        if not 0 <= only < spec["campaign"]["runs"]:
+            raise ScenarioError(f"only must be a run index in [0, {spec['campaign']['runs']}), got {only}")
+        with _AtomicDir(out / f"run-{only:04d}") as tmp:
+            result = replay_one(spec, only, seed, tmp, progress)
+            write_json(tmp / "result.json", result)
+        return result
+    if only is not None:
+        raise ScenarioError(f"only applies to campaigns (kind 'enclosure'), not to kind {spec['kind']!r}")
     with _AtomicDir(out) as tmp:
         kind_runner = {"paper": _paper, "prior_bound": _prior_bound, "structure": _structure}.get(spec["kind"])
         if kind_runner is None:
@@ -97,6 +107,8 @@ def _sim_progress(progress):
 def _save_run_files(run: ExperimentRun, out: Path, progress) -> None:
     run.dataset.save(out / "dataset")
     run.truth.save(out / "truth")
+    if hasattr(run.reference, "save"):
+        run.reference.save(out / "trajectory.npz")
     if run.spec["replay"]["enabled"]:
         progress("replay", 0, 1)
         try:

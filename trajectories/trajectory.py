@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import io
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from sim.dataset import atomic_write_bytes
 
 FORMAT = "h4bench.trajectory/1"
 ARRAYS = ("t", "x", "q", "qd", "qdd")
@@ -123,16 +123,7 @@ class Trajectory:
         meta = json.dumps({"format": FORMAT, "kind": self.kind, "parameters": self.parameters, "checks": self.checks})
         buf = io.BytesIO()
         np.savez(buf, metadata=np.array(meta), **{name: getattr(self, name) for name in ARRAYS})
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(buf.getvalue())
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write_bytes(path, buf.getvalue())
         return path
 
     @classmethod

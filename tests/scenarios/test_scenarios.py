@@ -157,3 +157,17 @@ def test_enclosure_on_a_dask_cluster(tmp_path):
     assert spec_runs["runs"] == 4
     assert spec_runs["methods"]["hull"]["misses"] == 0
     assert len(list((tmp_path / "dask" / "runs").glob("*.json"))) == 4
+
+
+def test_campaign_run_replayed_alone_is_the_same_run(tmp_path):
+    out = tmp_path / "enc"
+    run_scenario("enclosure", quick=True, out=out, workers=1)
+    first = json.loads((out / "runs" / "0002.json").read_text())
+    alone = run_scenario("enclosure", quick=True, out=out, only=2)
+    assert alone["seed"] == first["seed"] and alone["noise_shape"] == first["noise_shape"]
+    np.testing.assert_array_equal(alone["methods"]["hull"]["lower"], first["methods"]["hull"]["lower"])
+    np.testing.assert_array_equal(alone["true"], first["true"])
+    for name in ("result.json", "report.md", "replay.rrd", "dataset.npz", "trajectory.npz"):
+        assert (out / "run-0002" / name).is_file(), name
+    with pytest.raises(ScenarioError, match="only must be a run index"):
+        run_scenario("enclosure", quick=True, out=out, only=99)
