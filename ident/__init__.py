@@ -3,9 +3,9 @@
 from ident.parameters import N_PARAMETERS, NOMINAL_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, Box
 
 __all__ = ["Box", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS"]
-from ident.regressor import EXTRA_NAMES, inverse_dynamics, parameter_names, regressor  # noqa: E402
+from ident.regressor import EXTRA_NAMES, inverse_dynamics, parameter_names, parameter_units, regressor  # noqa: E402
 
-__all__ += ["EXTRA_NAMES", "inverse_dynamics", "parameter_names", "regressor"]
+__all__ += ["EXTRA_NAMES", "inverse_dynamics", "parameter_names", "parameter_units", "regressor"]
 from ident.estimate import InconsistentDataError, UnidentifiableError, estimate, min_consistent_bound  # noqa: E402
 from ident.wls import WLSResult, wls  # noqa: E402
 

@@ -24,16 +24,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident.parameters import PARAMETER_NAMES
+from ident.parameters import PARAMETER_NAMES, PARAMETER_UNITS
 
 EXTRA_NAMES: tuple[str, ...] = ("MXa1", "MXa2", "MXa3", "MXa4", "mf1", "mf2", "mf3", "mf4")
 STRUCTURES = ("paper", "extended")
+
+
+EXTRA_UNITS: tuple[str, ...] = ("kg m",) * 4 + ("kg",) * 4
 
 
 def parameter_names(structure: str = "paper") -> tuple[str, ...]:
     """Column names of the regressor for a model structure."""
     _check_structure(structure)
     return PARAMETER_NAMES if structure == "paper" else PARAMETER_NAMES + EXTRA_NAMES
+
+
+def parameter_units(structure: str = "paper") -> tuple[str, ...]:
+    """SI units of the columns, in :func:`parameter_names` order."""
+    _check_structure(structure)
+    return PARAMETER_UNITS if structure == "paper" else PARAMETER_UNITS + EXTRA_UNITS
 
 
 def _check_structure(structure) -> None:

@@ -76,8 +76,7 @@ class ExperimentRun:
             "model": self.model_path,
             "quick": self.spec.get("quick_applied", False),
             "parameters": names,
-            "units": list(ident.PARAMETER_UNITS) + ["kg m", "kg m", "kg m", "kg m"] + ["kg"] * 4
-            if len(names) > 14 else list(ident.PARAMETER_UNITS),
+            "units": list(ident.parameter_units(self.spec["structure"]["regressor"])),
             "true": self.theta_true.tolist(),
             "bound": self.bound_raw,
             "bound_parts": {"noise": self.spec["noise"]["bound"], "allowance": self.spec["bound"]["allowance"]},
