@@ -142,7 +142,7 @@ def run_experiment(spec: dict, seed: int | None = None, model=None, model_path: 
     dataset, truth = sim.simulate(
         model, reference, noise=noise, controller=controller, feedforward=ff, seed=seed,
         settings=sim.SimulationSettings(encoder_counts=spec["encoder"]["counts_per_turn"] or None),
-        metadata={"scenario": spec["name"], "model": path}, progress=progress,
+        metadata={"scenario": spec["name"], "model": path}, progress=progress, theta_true=theta_true,
     )
     timings["simulation"] = time.perf_counter() - t0
 

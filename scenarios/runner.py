@@ -224,27 +224,30 @@ def plot_prior_bound(result: dict, path: Path) -> None:
 
 
 def _structure(spec: dict, seed: int, out: Path, progress) -> dict:
-    """The robot breaks a hypothesis (unbalanced arms): the bound the paper's structure then needs, and what
-    the extended structure recovers."""
+    """The robot breaks the paper's hypotheses (unbalanced arms, heavy forearm rods): the bound the paper's
+    structure then needs, and what the extended structure recovers."""
     offsets = np.full(4, spec["structure"]["arm_com_offset"])
-    model, mxa = sim.unbalanced_arms_model(offsets, spec["model"] or None)
-    theta14 = sim.true_parameters(model)
+    forearm_mass = spec["structure"]["forearm_mass"]
+    model, theta22 = sim.broken_hypotheses_model(offsets, forearm_mass, spec["model"] or None)
+    theta14 = theta22[:14]
     progress("experiment (paper structure)", 0, 2)
     paper_spec = {**spec, "structure": {**spec["structure"], "regressor": "paper"}}
-    run14 = run_experiment(paper_spec, seed, model=model, progress=_sim_progress(progress))
+    run14 = run_experiment(paper_spec, seed, model=model, theta_true=theta14, progress=_sim_progress(progress))
     progress("experiment (extended structure)", 1, 2)
     ext_spec = {**spec, "structure": {**spec["structure"], "regressor": "extended"}}
-    theta22 = np.concatenate([theta14, mxa, np.zeros(4)])
     run22 = run_experiment(ext_spec, seed, model=model, theta_true=theta22, reference=run14.reference)
     r14, r22 = run14.result(), run22.result()
     result = dict(r22)
     result["arm_com_offset"] = offsets.tolist()
+    result["forearm_mass"] = forearm_mass
     result["paper_structure"] = r14
     _save_run_files(run22, out, progress)
     report.plot_boxes(r22, out / "boxes_extended.png", title="extended structure: boxes against the truth")
     report.plot_boxes(r14, out / "boxes_paper.png", title="paper structure on unbalanced arms")
     text = "\n".join([
-        f"# Scenario `{result['scenario']}`: arms unbalanced by {offsets[0]} m (MXa = {mxa[0]:.4g} kg m)", "",
+        f"# Scenario `{result['scenario']}`: arms unbalanced by {offsets[0]} m, forearms as {forearm_mass} kg rods",
+        "", "True values of the extended structure: the paper's 14 hold the rods' lumped halves; MXa = "
+        f"{theta22[14]:.4g} kg m (arm offset and the rod half at the arm tip), mf = {forearm_mass} kg.", "",
         "## The paper's 14-parameter structure", "", *report.summary_lines(r14),
         f"- the bound this structure needs for the guarantee: {r14['oracle_residual']:.4g} N m on processed rows "
         f"(assumed {r14['bound_processed']:.4g})", "", report.table1(r14), "",

@@ -36,6 +36,6 @@ __all__ += [
     "SimulationError", "SimulationSettings", "TorqueNoise", "VelocityFilter", "atomic_write_bytes", "axis_inertia",
     "default_controller", "design_joint_controller", "quantise", "simulate",
 ]
-from sim.variants import randomised_model, unbalanced_arms_model  # noqa: E402
+from sim.variants import broken_hypotheses_model, randomised_model, unbalanced_arms_model  # noqa: E402
 
-__all__ += ["randomised_model", "unbalanced_arms_model"]
+__all__ += ["broken_hypotheses_model", "randomised_model", "unbalanced_arms_model"]

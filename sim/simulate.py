@@ -151,14 +151,16 @@ def _reference_arrays(reference):
 
 def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = None, controller=None,
              feedforward: np.ndarray | None = None, settings: SimulationSettings | None = None, seed: int = 0,
-             metadata: dict | None = None, progress=None) -> tuple[Dataset, GroundTruth]:
+             metadata: dict | None = None, progress=None, theta_true=None) -> tuple[Dataset, GroundTruth]:
     """Run the closed-loop experiment along ``reference`` (t (n,), q, qd, qdd (n, 4)) and return the
     measured :class:`Dataset` and the :class:`GroundTruth`.
 
     controller : a callable ``(q_ref, qd_ref, q, qd, feedforward=...) -> tau (4,)`` with ``reset()``, e.g. the
     second value of :func:`default_controller` (designed from nominal parameters, never from the truth).
     feedforward : (n, 4) torques added to the controller's output (e.g. inverse dynamics of the reference
-    with nominal parameters). progress : optional callable(k, n) called every 1000 samples.
+    with nominal parameters). progress : optional callable(k, n) called every 1000 samples. theta_true : the
+    truth to record when the model is a variant whose parameters ``true_parameters`` cannot read (e.g. the
+    extended structure's 22 values of :func:`sim.broken_hypotheses_model`).
     """
     settings = settings or SimulationSettings()
     noise = noise or TorqueNoise(0.0, "none")
@@ -244,7 +246,7 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     meta.update(metadata or {})
     dataset = Dataset(t=t.copy(), q=out["q_meas"], tau=out["tau_cmd"], metadata=meta)
     truth = GroundTruth(
-        theta=true_parameters(model), q=out["q"], qd=out["qd"], qdd=out["qdd"], x=out["x"], xdd=out["xdd"],
+        theta=true_parameters(model) if theta_true is None else np.asarray(theta_true, dtype=float), q=out["q"], qd=out["qd"], qdd=out["qdd"], x=out["x"], xdd=out["xdd"],
         tau_applied=out["tau_app"], noise=out["tau_app"] - out["tau_cmd"], loop_violation=violation, h=h,
         names=TRUE_PARAMETER_ORDER,
     )

@@ -57,6 +57,72 @@ def randomised_model(seed: int, spread: float = 0.3, path=None) -> mujoco.MjMode
     return _compile(spec, path)
 
 
+def broken_hypotheses_model(arm_com_offset=0.0, forearm_mass: float = 0.0, path=None
+                            ) -> tuple[mujoco.MjModel, np.ndarray]:
+    """The H4 breaking the paper's hypotheses, with the true values of the extended regressor (22 columns:
+    the paper's 14, ``MXa1..4``, ``mf1..4``, see ``ident.regressor``).
+
+    arm_com_offset : scalar or (4,) [m], each arm's centre of mass moved out along the arm (unbalanced arms);
+    forearm_mass : [kg] each forearm becomes a uniform thin rod body (universal joint at the arm tip B_i, a
+    ``connect`` equality at the nacelle point A_i) instead of a massless tendon. The paper's parameters then
+    hold the rod's two lumped halves (m/2 at B_i: Imot += m L^2 / 2 and a first moment MXa += m L / 2; m/2 at
+    A_i: Mnac += m / 2, Ibc += m |DC_i|^2 / 2) and ``mf_i = m`` carries the rest (the rod minus its halves).
+    """
+    offsets = np.broadcast_to(np.asarray(arm_com_offset, dtype=float), (4,)).copy()
+    if not np.all(np.isfinite(offsets)):
+        raise ValueError(f"arm_com_offset must be finite [m], got {arm_com_offset!r}")
+    if not (np.isfinite(forearm_mass) and forearm_mass >= 0):
+        raise ValueError(f"forearm_mass must be a finite number >= 0 [kg], got {forearm_mass!r}")
+    base, mxa = unbalanced_arms_model(offsets, path)
+    from sim.model import H4Geometry
+    from sim.truth import true_parameters
+
+    theta = np.concatenate([true_parameters(base), mxa, np.zeros(4)])
+    if forearm_mass == 0.0:
+        return base, theta
+    geometry = H4Geometry.from_model(base)
+    spec = _spec(path)
+    for i, r in enumerate(offsets):
+        spec.body(f"arm{i + 1}").ipos = [r, 0.0, 0.0]
+    data = mujoco.MjData(base)
+    mujoco.mj_kinematics(base, data)
+    for i in range(4):
+        arm_id = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_BODY, f"arm{i + 1}")
+        b_site = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_SITE, f"B{i + 1}")
+        a_site = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_SITE, f"A{i + 1}")
+        rot_arm = data.xmat[arm_id].reshape(3, 3)
+        along = rot_arm.T @ (data.site_xpos[a_site] - data.site_xpos[b_site])
+        length = float(np.linalg.norm(along))
+        x = along / length
+        helper = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        y = np.cross(helper, x)
+        y /= np.linalg.norm(y)
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, np.column_stack([x, y, np.cross(x, y)]).ravel())
+        rod = spec.body(f"arm{i + 1}").add_body(name=f"forearm_rod{i + 1}", pos=base.site_pos[b_site], quat=quat)
+        rod.add_joint(name=f"rod{i + 1}_a", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
+        rod.add_joint(name=f"rod{i + 1}_b", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+        rod.explicitinertial = True
+        rod.mass = forearm_mass
+        rod.ipos = [length / 2, 0.0, 0.0]
+        rod.inertia = [1e-9, forearm_mass * length**2 / 12, forearm_mass * length**2 / 12]  # thin uniform rod
+        rod.add_site(name=f"rod_end{i + 1}", pos=[length, 0.0, 0.0])
+        loop = spec.equality(f"loop{i + 1}")
+        solref, solimp = list(loop.solref), list(loop.solimp)
+        spec.delete(loop)
+        eq = spec.add_equality(name=f"rod_loop{i + 1}", type=mujoco.mjtEq.mjEQ_CONNECT,
+                               objtype=mujoco.mjtObj.mjOBJ_SITE, name1=f"rod_end{i + 1}", name2=f"A{i + 1}")
+        eq.solref, eq.solimp = solref, solimp
+    model = _compile(spec, path)
+    half = forearm_mass / 2.0
+    theta[:4] += half * geometry.arm_length**2
+    theta[4] += 4 * half
+    theta[5] += half * float(np.sum(geometry.bar_offset[:, :2] ** 2))
+    theta[14:18] += half * geometry.arm_length
+    theta[18:22] = forearm_mass
+    return model, theta
+
+
 def unbalanced_arms_model(offsets, path=None) -> tuple[mujoco.MjModel, np.ndarray]:
     """The H4 with each arm's centre of mass moved by ``offsets[i]`` [m] along the arm (from the motor axis):
     the arms are no longer balanced and gravity loads the motors. Returns (model, MXa) with MXa_i = m_i r_i
