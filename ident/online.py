@@ -1,0 +1,277 @@
+"""Online guaranteed estimation: the exact hull updated as rows stream in.
+
+The feasible set after N rows, ``S_N = {theta in Q : |y_k - W_k theta| <= b_k, k <= N}``, only shrinks as rows
+arrive. :class:`OnlineHull` keeps, for each of the 2p endpoints ``min / max theta_i``, one small HiGHS model
+holding the rows that endpoint needed so far (its working set) and that model's optimal basis. On
+:meth:`OnlineHull.update`:
+
+1. the 2p current optimal points are checked against the new rows (one small matrix product);
+2. an endpoint whose point satisfies every new row **stays optimal** (its point is still feasible for the
+   smaller set and no point of the smaller set can do better), and its safe bound stays valid (a bound for a
+   larger set);
+3. the other endpoints get their violated new rows added to their own model and are re-solved from their
+   previous optimal basis (dual simplex: few iterations); their new points are checked against all rows seen
+   so far (constraint generation, as :func:`ident.hull.interval_hull`), the worst violated rows are added and
+   the LPs re-solved until no row is violated by more than ``violation_tol`` times its half-width.
+
+Every endpoint returned is a Neumaier-Shcherbina safe bound of its model's LP (rows outward rounded, duals
+mapped back to the original data), hence a rigorous bound for ``S_N`` whatever the LP tolerances; the box is
+also intersected with the previous one (both enclose ``S_N``), so it never grows. After the last update the box
+equals the batch hull of the same rows to the LP tolerance (same convergence test). One model per endpoint
+(rather than one shared model with switched bases) keeps each re-solve a plain warm start of the model that
+was optimal for that objective; the working sets are a few hundred rows, so memory stays small.
+
+When a model becomes infeasible the stream may contradict the bound: a Chebyshev LP over all rows seen
+decides (:func:`ident.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError` is
+raised, now and on every later update (rows only shrink the set). If it is not proven (the set is thinner
+than the LP tolerance), the box of the batch :func:`ident.estimate` on all rows seen is returned (it encloses
+a slightly inflated set) and ``info['fallback'] = 'batch'``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import highspy
+import numpy as np
+
+from ident.estimate import InconsistentDataError, _check_finite, _check_prior, _inconsistent, _real_array, estimate
+from ident.hull import _add_dense_rows, _new_highs, power2_scale, safe_lower_bound, strip_bounds, chebyshev
+from ident.parameters import Box
+
+__all__ = ["OnlineHull"]
+
+_OPTIMAL = highspy.HighsModelStatus.kOptimal
+_INFEASIBLE = highspy.HighsModelStatus.kInfeasible
+
+
+class OnlineHull:
+    """Exact interval hull of the bounded-error feasible set, updated row block by row block.
+
+    prior : :class:`~ident.Box` or (lower, upper) finite arrays; p : number of parameters (checked against the
+    prior; taken from it when omitted); lp_tol : HiGHS tolerances; violation_tol : a row counts as violated
+    when off by more than this fraction of its half-width (tightness only); add_rows : rows added per
+    endpoint per round of constraint generation.
+
+    Use ``box = hull.update(W_rows, y_rows, bound_rows)`` for each block; ``hull.box`` is the current box.
+    """
+
+    def __init__(self, prior, p: int | None = None, *, lp_tol: float = 1e-9, violation_tol: float = 1e-10,
+                 add_rows: int = 10) -> None:
+        if p is None:
+            if isinstance(prior, Box):
+                p = len(prior)
+            elif isinstance(prior, (tuple, list)) and len(prior) == 2:
+                p = int(np.size(prior[0]))
+            else:
+                raise TypeError(f"prior must be a Box or a (lower, upper) pair, got {type(prior).__name__}")
+        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1:
+            raise ValueError(f"p must be an integer >= 1 (number of parameters), got {p!r}")
+        self.p = int(p)
+        self._lo, self._hi, self.names = _check_prior(prior, self.p)
+        for name, val in (("lp_tol", lp_tol), ("violation_tol", violation_tol)):
+            if isinstance(val, bool) or not isinstance(val, (int, float)) or not (np.isfinite(val) and val > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {val!r}")
+        if isinstance(add_rows, bool) or not isinstance(add_rows, (int, np.integer)) or add_rows < 1:
+            raise ValueError(f"add_rows must be an integer >= 1, got {add_rows!r}")
+        self.lp_tol, self.violation_tol, self.add_rows = float(lp_tol), float(violation_tol), int(add_rows)
+        p = self.p
+        cap = 1024
+        self._W = np.empty((cap, p))
+        self._y = np.empty(cap)
+        self._b = np.empty(cap)
+        self._bl = np.empty(cap)
+        self._bu = np.empty(cap)
+        self._n = 0
+        self._d: np.ndarray | None = None  # column scale, fixed at the first rows
+        self._models: list[highspy.Highs | None] = [None] * (2 * p)
+        self._ws: list[list[int]] = [[] for _ in range(2 * p)]  # working-set rows, in model order
+        self._in_ws = [np.zeros(cap, dtype=bool) for _ in range(2 * p)]
+        # current optimal points (columns): min theta_i at the prior's lower corner in i, centre elsewhere
+        centre = 0.5 * self._lo + 0.5 * self._hi
+        self._x = np.repeat(centre[:, None], 2 * p, axis=1)
+        for i in range(p):
+            self._x[i, i] = self._lo[i]
+            self._x[i, p + i] = self._hi[i]
+        self._lower = self._lo.copy()
+        self._upper = self._hi.copy()
+        self._duals: list[np.ndarray | None] = [None] * (2 * p)
+        self._error: InconsistentDataError | None = None
+        self.stats = {"updates": 0, "resolved_endpoints": 0, "lp_solves": 0, "lp_iterations": 0}
+
+    # ------------------------------------------------------------------------------------------ state
+    @property
+    def rows_seen(self) -> int:
+        return self._n
+
+    @property
+    def box(self) -> Box:
+        return Box(self._lower.copy(), self._upper.copy(), self.names, info={"rows": self._n, **self.stats})
+
+    def _grow(self, extra: int) -> None:
+        need = self._n + extra
+        cap = self._W.shape[0]
+        if need <= cap:
+            return
+        new = max(need, 2 * cap)
+        for name in ("_W", "_y", "_b", "_bl", "_bu"):
+            old = getattr(self, name)
+            arr = np.empty((new,) + old.shape[1:])
+            arr[: self._n] = old[: self._n]
+            setattr(self, name, arr)
+        self._in_ws = [np.concatenate([m, np.zeros(new - cap, dtype=bool)]) for m in self._in_ws]
+
+    def _cost(self, j: int) -> np.ndarray:
+        c = np.zeros(self.p)
+        c[j % self.p] = 1.0 if j < self.p else -1.0
+        return c
+
+    def _model(self, j: int) -> highspy.Highs:
+        if self._models[j] is None:
+            h = _new_highs(self.lp_tol)
+            h.setOptionValue("simplex_strategy", 1)  # dual simplex: new rows keep the basis dual feasible
+            h.addVars(self.p, self._lo / self._d, self._hi / self._d)
+            h.changeColsCost(self.p, np.arange(self.p, dtype=np.int32), self._cost(j) * self._d)
+            self._models[j] = h
+        return self._models[j]
+
+    def _add(self, j: int, rows: np.ndarray) -> None:
+        rows = rows[~self._in_ws[j][rows]]
+        if rows.size == 0:
+            return
+        r = power2_scale(0.5 * self._bu[rows] - 0.5 * self._bl[rows])
+        _add_dense_rows(self._model(j), self._W[rows] * self._d * r[:, None], self._bl[rows] * r, self._bu[rows] * r)
+        self._in_ws[j][rows] = True
+        self._ws[j].extend(rows.tolist())
+
+    # ------------------------------------------------------------------------------------------ update
+    def update(self, W_rows, y_rows, bound_rows) -> Box:
+        """Add rows ``|y_k - W_k theta| <= bound_k`` and return the updated rigorous box.
+
+        W_rows : (k, p); y_rows : (k,); bound_rows : scalar or (k,) positive. Returns a :class:`~ident.Box`
+        with ``info``: ``rows`` (seen so far), ``resolved`` (endpoints re-solved by this update), ``seconds``.
+        Raises :class:`~ident.InconsistentDataError` when the rows seen so far are proven inconsistent.
+        """
+        t0 = time.perf_counter()
+        W = _real_array(W_rows, "W_rows")
+        if W.ndim == 1 and W.size == self.p:
+            W = W[None, :]
+        if W.ndim != 2 or W.shape[1] != self.p:
+            raise ValueError(f"W_rows must have shape (k, {self.p}), got {W.shape}")
+        k = W.shape[0]
+        y = np.atleast_1d(_real_array(y_rows, "y_rows"))
+        if y.shape != (k,):
+            raise ValueError(f"y_rows must have shape ({k},) to match W_rows, got {y.shape}")
+        b = _real_array(bound_rows, "bound_rows")
+        b = np.full(k, float(b)) if b.ndim == 0 else b
+        if b.shape != (k,):
+            raise ValueError(f"bound_rows must be a scalar or have shape ({k},), got {b.shape}")
+        _check_finite(W, "W_rows")
+        _check_finite(y, "y_rows")
+        if not np.all(np.isfinite(b) & (b > 0)):
+            raise ValueError("bound_rows must be finite and > 0 in every row")
+        if self._error is not None:
+            raise self._error
+        if k == 0:
+            return self.box
+        self._grow(k)
+        s, e = self._n, self._n + k
+        self._W[s:e], self._y[s:e], self._b[s:e] = W, y, b
+        self._bl[s:e], self._bu[s:e] = strip_bounds(y, b)
+        self._n = e
+        if self._d is None:
+            from ident.hull import _column_scale
+
+            self._d = _column_scale(W)
+        # 1. which endpoints does a new row cut off?
+        new = np.arange(s, e)
+        viol = self._violation(new, self._x)
+        todo = {int(j): new[viol[:, j] > self.violation_tol] for j in np.flatnonzero((viol > self.violation_tol).any(axis=0))}
+        resolved = sorted(todo)
+        self.stats["updates"] += 1
+        self.stats["resolved_endpoints"] += len(resolved)
+        fallback = None
+        # 2. re-solve them, with constraint generation against all rows seen
+        first = True
+        while todo:
+            for j, rows in todo.items():
+                if not first and rows.size > self.add_rows:  # new rows go in at once; older ones the worst first
+                    rows = rows[np.argsort(-self._violation(rows, self._x[:, [j]])[:, 0])[: self.add_rows]]
+                self._add(j, rows)
+                status = self._solve(j)
+                if status == "infeasible":
+                    fallback = self._infeasible()
+                    break
+            if fallback is not None:
+                break
+            first = False
+            cols = np.array(sorted(todo))
+            v = self._violation(np.arange(self._n), self._x[:, cols])
+            todo = {}
+            for c, j in enumerate(cols):
+                bad = np.flatnonzero((v[:, c] > self.violation_tol) & ~self._in_ws[j][: self._n])
+                if bad.size:
+                    todo[int(j)] = bad
+        if fallback is not None:
+            lower, upper = fallback
+        else:
+            for j in resolved:
+                self._bound(j)
+            lower, upper = self._lower, self._upper
+        self._lower = np.maximum(self._lower, lower)
+        self._upper = np.minimum(self._upper, upper)
+        box = self.box
+        box.info.update({"resolved": resolved, "seconds": time.perf_counter() - t0})
+        if fallback is not None:
+            box.info["fallback"] = "batch"
+        return box
+
+    def _violation(self, rows: np.ndarray, x_cols: np.ndarray) -> np.ndarray:
+        """``|W_k x - mid_k| / half_k - 1`` (> 0: violated) for rows k and each column x (float heuristic)."""
+        mid = 0.5 * self._bl[rows] + 0.5 * self._bu[rows]
+        half = 0.5 * self._bu[rows] - 0.5 * self._bl[rows]
+        return np.abs(self._W[rows] @ x_cols - mid[:, None]) / half[:, None] - 1.0
+
+    def _solve(self, j: int) -> str:
+        h = self._model(j)
+        h.run()
+        info = h.getInfo()
+        self.stats["lp_solves"] += 1
+        self.stats["lp_iterations"] += int(info.simplex_iteration_count)
+        status = h.getModelStatus()
+        if status == _INFEASIBLE:
+            return "infeasible"
+        sol = h.getSolution()
+        if status != _OPTIMAL or not sol.value_valid:
+            return "failed"  # the previous (valid) bound of this endpoint stays
+        self._x[:, j] = np.clip(np.asarray(sol.col_value) * self._d, self._lo, self._hi)
+        self._duals[j] = np.asarray(sol.row_dual).copy() if sol.dual_valid else None
+        return "ok"
+
+    def _bound(self, j: int) -> None:
+        """Tighten endpoint j by the safe bound of its model's last duals (any duals give a valid bound)."""
+        rd = self._duals[j]
+        if rd is None:
+            return
+        ws = np.asarray(self._ws[j], dtype=np.int64)
+        r = power2_scale(0.5 * self._bu[ws] - 0.5 * self._bl[ws])
+        yd = rd * r  # duals of the unscaled rows (the cost was scaled as c' = D c)
+        nz = yd != 0.0
+        rows = ws[nz]
+        mu = safe_lower_bound(self._W[rows], self._bl[rows], self._bu[rows], self._lo, self._hi, self._cost(j), yd[nz])
+        i = j % self.p
+        if j < self.p:
+            self._lower[i] = max(self._lower[i], mu)
+        else:
+            self._upper[i] = min(self._upper[i], -mu)
+
+    def _infeasible(self):
+        """A working set is infeasible: prove the emptiness of all rows seen, or fall back to the batch hull."""
+        n = self._n
+        W, y, b = self._W[:n], self._y[:n], self._b[:n]
+        ch = chebyshev(W, y, b, self._lo, self._hi)
+        if ch.lower > 1.0:
+            self._error = _inconsistent(W, y, b, bool(np.all(b == b[0])), self._lo, self._hi, ch.lower)
+            raise self._error
+        box = estimate(W, y, b, (self._lo, self._hi))
+        return np.array(box.lower), np.array(box.upper)

@@ -1,0 +1,132 @@
+"""The online hull (ident.online.OnlineHull) against the batch hull of the same rows.
+
+Oracle: ``ident.estimate(method="hull")`` on all rows seen so far (tested elsewhere against linprog and exact
+rationals), and scipy's linprog on a small problem. Every intermediate box must contain the batch hull of the
+rows seen so far, and after the last update the two must agree. Both are rigorous outer boxes of the same set,
+each above the exact hull by its own safe-bound slack (measured up to 3e-9 for the batch box at 1480 rows,
+LP tolerance 1e-9): containment and equality are judged at 1e-7 of the prior width. Against linprog (the exact
+hull to its own tolerance) the online box must be outer to 1e-9.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+import ident
+from ident.online import OnlineHull
+
+TOL = 2e-7  # 1e-7 of the prior width (2)
+
+
+def h4_like(seed: int, n_samples: int, p: int = 14):
+    """Rows in time order, 4 per sample, smooth in time, columns of different scales; noise in +-1, bound 1."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_samples) * 1e-3
+    f = rng.uniform(0.3, 3.0, p)
+    ph = rng.uniform(0, 2 * np.pi, p)
+    scale = 10.0 ** rng.uniform(-1, 1.5, p)
+    base = np.sin(2 * np.pi * f * t[:, None] + ph)
+    W = (base[:, None, :] * scale * rng.uniform(0.5, 1.5, (1, 4, p))).reshape(-1, p)
+    W += 0.3 * rng.standard_normal(W.shape) * scale  # keep it exciting
+    theta = rng.uniform(0.5, 1.5, p)
+    y = W @ theta + rng.uniform(-1, 1, W.shape[0])
+    return W, y, theta
+
+
+@pytest.mark.parametrize("chunk", [1, 40, 400])
+def test_every_box_contains_the_batch_hull_and_the_last_equals_it(chunk):
+    W, y, theta = h4_like(0, 300 if chunk == 1 else 1000, p=6 if chunk == 1 else 14)
+    p = W.shape[1]
+    prior = (np.zeros(p), 2.0 * np.ones(p))
+    hull = OnlineHull(prior)
+    previous = hull.box
+    n = W.shape[0]
+    check_every = max(1, (n // chunk) // 8)
+    for c, s in enumerate(range(0, n, chunk)):
+        e = min(n, s + chunk)
+        box = hull.update(W[s:e], y[s:e], 1.0)
+        assert box.contains(theta).all()
+        assert np.all(box.lower >= previous.lower) and np.all(box.upper <= previous.upper)  # never grows
+        previous = box
+        if e >= p and (c % check_every == 0 or e == n):
+            batch = ident.estimate(W[:e], y[:e], 1.0, prior)
+            assert np.all(box.lower <= batch.lower + TOL) and np.all(box.upper >= batch.upper - TOL), e
+    np.testing.assert_allclose(box.lower, batch.lower, atol=TOL)
+    np.testing.assert_allclose(box.upper, batch.upper, atol=TOL)
+    assert hull.rows_seen == n
+
+
+def test_online_box_contains_the_linprog_hull():
+    rng = np.random.default_rng(4)
+    W = rng.standard_normal((60, 3))
+    y = W @ np.array([1.0, 0.5, 1.5]) + rng.uniform(-1, 1, 60)
+    hull = OnlineHull((np.zeros(3), 3 * np.ones(3)))
+    for s in range(0, 60, 7):
+        box = hull.update(W[s:s + 7], y[s:s + 7], np.ones(min(7, 60 - s)))
+    A, rhs = np.vstack([W, -W]), np.concatenate([y + 1, 1 - y])
+    for i in range(3):
+        c = np.zeros(3)
+        c[i] = 1
+        lo = linprog(c, A_ub=A, b_ub=rhs, bounds=[(0, 3)] * 3, method="highs").fun
+        hi = -linprog(-c, A_ub=A, b_ub=rhs, bounds=[(0, 3)] * 3, method="highs").fun
+        assert box.lower[i] <= lo + 1e-9 and box.upper[i] >= hi - 1e-9
+        assert box.lower[i] == pytest.approx(lo, abs=1e-7) and box.upper[i] == pytest.approx(hi, abs=1e-7)
+
+
+def test_untouched_endpoints_are_not_resolved():
+    """A row that cuts off none of the current optimal points re-solves nothing."""
+    W, y, _ = h4_like(1, 500, p=4)
+    hull = OnlineHull((np.zeros(4), 2 * np.ones(4)))
+    hull.update(W, y, 1.0)
+    before = hull.stats["lp_solves"]
+    box = hull.update(np.zeros((1, 4)), np.zeros(1), 1.0)  # |0 - 0 theta| <= 1: satisfied everywhere
+    assert box.info["resolved"] == [] and hull.stats["lp_solves"] == before
+
+
+def test_a_stream_that_contradicts_the_bound_raises_and_stays_inconsistent():
+    W, y, _ = h4_like(2, 200, p=4)
+    hull = OnlineHull((np.zeros(4), 2 * np.ones(4)))
+    hull.update(W[:400], y[:400], 1.0)
+    bad_y = y[400:440].copy()
+    bad_y[5] += 100.0
+    with pytest.raises(ident.InconsistentDataError) as err:
+        hull.update(W[400:440], bad_y, 1.0)
+    assert err.value.min_bound > 1.0
+    with pytest.raises(ident.InconsistentDataError):
+        hull.update(W[440:480], y[440:480], 1.0)
+
+
+def test_bad_inputs_are_named():
+    hull = OnlineHull(ident.Box(np.zeros(3), np.ones(3)))
+    with pytest.raises(ValueError, match=r"W_rows must have shape \(k, 3\)"):
+        hull.update(np.ones((2, 4)), np.ones(2), 1.0)
+    with pytest.raises(ValueError, match=r"y_rows must have shape \(2,\)"):
+        hull.update(np.ones((2, 3)), np.ones(3), 1.0)
+    with pytest.raises(ValueError, match="bound_rows must be a scalar or have shape"):
+        hull.update(np.ones((2, 3)), np.ones(2), np.ones(3))
+    with pytest.raises(ValueError, match="bound_rows must be finite and > 0"):
+        hull.update(np.ones((2, 3)), np.ones(2), 0.0)
+    with pytest.raises(ValueError, match="W_rows must be finite"):
+        hull.update(np.full((2, 3), np.nan), np.ones(2), 1.0)
+    with pytest.raises(ValueError, match="prior lower and upper must have shape"):
+        OnlineHull((np.zeros(3), np.ones(3)), p=4)
+    with pytest.raises(ValueError, match="p must be an integer >= 1"):
+        OnlineHull((np.zeros(3), np.ones(3)), p=0)
+    with pytest.raises(ValueError, match="prior must be finite"):
+        OnlineHull((np.zeros(3), np.full(3, np.inf)))
+    assert hull.rows_seen == 0  # nothing was added by the rejected updates
+
+
+def test_new_estimators_import_neither_sim_nor_mujoco():
+    """DESIGN.md: estimator modules work on any (W, y) and never import the simulator (static check)."""
+    root = Path(ident.__file__).parent
+    for name in ("outliers", "uncertain", "online"):
+        tree = ast.parse((root / f"{name}.py").read_text())
+        modules = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        modules |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        assert not modules & {"sim", "mujoco"}, name
