@@ -10,3 +10,9 @@ from ident.estimate import InconsistentDataError, UnidentifiableError, estimate,
 from ident.wls import WLSResult, wls  # noqa: E402
 
 __all__ += ["InconsistentDataError", "UnidentifiableError", "WLSResult", "estimate", "min_consistent_bound", "wls"]
+from ident.online import OnlineHull  # noqa: E402
+from ident.outliers import OutlierBudgetError, OutlierRows, detect_outliers, relaxed_hull  # noqa: E402
+from ident.uncertain import Distortion, IntervalEquation, interval_equation, interval_regressor, uncertain_hull  # noqa: E402
+
+__all__ += ["Distortion", "IntervalEquation", "OnlineHull", "OutlierBudgetError", "OutlierRows", "detect_outliers",
+            "interval_equation", "interval_regressor", "relaxed_hull", "uncertain_hull"]
