@@ -38,7 +38,11 @@ DEFAULTS: dict = {
     "campaign": {"runs": 200, "noise_shapes": ["uniform", "square", "sine"], "parameter_spread": 0.3,
                  "workers": 0, "scheduler": ""},
     "sweep": {"factors": [0.5, 0.8, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0, 5.0]},
-    "outliers": {"count": 5, "magnitude": 6.0, "relax": 8},
+    "outliers": {"count": 5, "magnitude": 6.0, "relax": 8, "method": "auto"},
+    # uncertain_regressor: the filter-distortion assumption is calibrated on a simulation with the same reference,
+    # seed + calibration_seed_offset and robot parameters within +-calibration_spread, times safety
+    "uncertain": {"calibration_seed_offset": 1000, "calibration_spread": 0.3, "safety": 2.0, "sign_band": 0.005,
+                  "second_order_margin": 0.1},
     "replay": {"enabled": True, "history_points": 10},
     "quick": {},
 }
