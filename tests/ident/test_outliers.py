@@ -206,3 +206,26 @@ def test_bad_data_are_named():
         relaxed_hull(W, np.ones(10), 1.0, (np.zeros(3), np.ones(3)), 1)
     with pytest.raises(ValueError, match="prior lower and upper must have shape"):
         detect_outliers(W, np.ones(10), 1.0, (np.zeros(3), np.ones(3)))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(15, 75))
+def test_exact_equals_brute_force_more_seeds(seed):
+    test_exact_equals_brute_force_and_groups_contain_it(seed)
+
+
+@pytest.mark.slow
+def test_exact_is_inside_groups_on_a_medium_problem():
+    """200 rows, p = 6, 3 outliers under q = 4: the certified search finishes and is inside the groups box."""
+    rng = np.random.default_rng(200)
+    m, p = 200, 6
+    W = rng.standard_normal((m, p))
+    theta = rng.uniform(0.5, 1.5, p)
+    y = W @ theta + rng.uniform(-1, 1, m)
+    bad = rng.choice(m, 3, replace=False)
+    y[bad] += rng.choice([-1, 1], 3) * rng.uniform(1.5, 4, 3)
+    prior = (np.zeros(p), 3 * np.ones(p))
+    groups = relaxed_hull(W, y, 1.0, prior, 4, method="groups")
+    exact = relaxed_hull(W, y, 1.0, prior, 4, method="exact")
+    assert exact.info["exact"] and exact.contains(theta).all()
+    assert np.all(exact.lower >= groups.lower) and np.all(exact.upper <= groups.upper)

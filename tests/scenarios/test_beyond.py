@@ -95,3 +95,17 @@ def test_bad_outlier_spec_fails_before_simulating_and_leaves_nothing(tmp_path):
         run_scenario(spec, out=out)
     assert not out.exists()
     assert not list(tmp_path.glob(".bad.tmp-*"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_beyond_scenarios_on_other_seeds(tmp_path, seed):
+    """The designed outcome is not a property of seed 0 (a few seconds per run)."""
+    result = run_scenario("outliers", quick=True, seed=seed, out=tmp_path / "o")
+    o = result["outliers"]
+    assert plain_fails(result["methods"]["hull"]) and result["methods"]["relaxed"]["all_enclosed"]
+    assert set(o["detected_rows_certain"]) <= set(o["rows_breaking_bound_at_truth"])
+    assert np.nanmax(o["relaxed_over_clean_width"]) < 1.5
+    result = run_scenario("uncertain-regressor", quick=True, seed=seed, out=tmp_path / "u")
+    assert plain_fails(result["methods"]["hull"]) and result["methods"]["interval"]["all_enclosed"]
+    assert result["uncertain"]["distortion_assumption_held"] and result["uncertain"]["truth_in_interval_set"]
