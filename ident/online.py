@@ -75,6 +75,7 @@ class OnlineHull:
         if isinstance(add_rows, bool) or not isinstance(add_rows, (int, np.integer)) or add_rows < 1:
             raise ValueError(f"add_rows must be an integer >= 1, got {add_rows!r}")
         self.lp_tol, self.violation_tol, self.add_rows = float(lp_tol), float(violation_tol), int(add_rows)
+        self.max_rounds = 200  # rounds of constraint generation per update (each adds rows; a safety stop)
         p = self.p
         cap = 1024
         self._W = np.empty((cap, p))
@@ -193,7 +194,10 @@ class OnlineHull:
         fallback = None
         # 2. re-solve them, with constraint generation against all rows seen
         first = True
-        while todo:
+        failed: set[int] = set()  # endpoints HiGHS could not solve: they keep their previous (valid) bound
+        for _ in range(self.max_rounds):
+            if not todo:
+                break
             for j, rows in todo.items():
                 if not first and rows.size > self.add_rows:  # new rows go in at once; older ones the worst first
                     rows = rows[np.argsort(-self._violation(rows, self._x[:, [j]])[:, 0])[: self.add_rows]]
@@ -202,9 +206,14 @@ class OnlineHull:
                 if status == "infeasible":
                     fallback = self._infeasible()
                     break
+                if status == "failed":
+                    failed.add(j)
             if fallback is not None:
                 break
             first = False
+            todo = {j: r for j, r in todo.items() if j not in failed}
+            if not todo:
+                break
             cols = np.array(sorted(todo))
             v = self._violation(np.arange(self._n), self._x[:, cols])
             todo = {}
@@ -221,7 +230,7 @@ class OnlineHull:
         self._lower = np.maximum(self._lower, lower)
         self._upper = np.minimum(self._upper, upper)
         box = self.box
-        box.info.update({"resolved": resolved, "seconds": time.perf_counter() - t0})
+        box.info.update({"resolved": resolved, "seconds": time.perf_counter() - t0, "lp_failures": sorted(failed)})
         if fallback is not None:
             box.info["fallback"] = "batch"
         return box
@@ -234,6 +243,7 @@ class OnlineHull:
 
     def _solve(self, j: int) -> str:
         h = self._model(j)
+        self._duals[j] = None  # until this solve gives duals for the model's current rows
         h.run()
         info = h.getInfo()
         self.stats["lp_solves"] += 1
@@ -273,5 +283,9 @@ class OnlineHull:
         if ch.lower > 1.0:
             self._error = _inconsistent(W, y, b, bool(np.all(b == b[0])), self._lo, self._hi, ch.lower)
             raise self._error
-        box = estimate(W, y, b, (self._lo, self._hi))
+        try:
+            box = estimate(W, y, b, (self._lo, self._hi))
+        except InconsistentDataError as exc:
+            self._error = exc
+            raise
         return np.array(box.lower), np.array(box.upper)
