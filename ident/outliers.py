@@ -531,8 +531,8 @@ def relaxed_hull(W, y, bound, prior, q: int, *, method: str = "auto", groups=Non
             X_lo, X_hi = np.maximum(X_lo, res[0]), np.minimum(X_hi, res[1])
             exact = True
             break
-        gs = _check_groups(groups, budget, active.size) if groups is not None else \
-            tuple(g for g in (budget + 1, 2 * budget + 1) if g <= active.size) or (budget + 1,)
+        wanted = (budget + 1, 2 * budget + 1) if groups is None else _check_groups(groups, q, m)
+        gs = tuple(sorted({max(g, budget + 1) for g in wanted if g <= active.size})) or (budget + 1,)
         new = np.zeros(0, dtype=np.int64)
         first = None
         for G in gs:

@@ -234,11 +234,12 @@ def test_interval_filter_contains_filtered_members():
     np.testing.assert_array_equal(yf, parallel_filter(Wc, y, 0.1, 5, taps=h).y)
 
 
-def test_interval_equation_encloses_a_noise_free_recording(geometry, exact_recording):
-    """On MuJoCo's exact states and torques (no friction mismatch rows: checked by the enclosure), with the
-    encoder part only and distortion measured on the same record, the truth is in the interval set."""
+@pytest.mark.parametrize("decimation, numtaps", [(10, 41), (1, 1)])
+def test_interval_equation_encloses_a_noise_free_recording(geometry, exact_recording, decimation, numtaps):
+    """On MuJoCo's exact states and torques, exact angles (no encoder part) and the distortion measured on the
+    same record, the truth is in the interval feasible set, with and without the parallel filter."""
     rec = exact_recording
-    settings = ProcessingSettings(dt=rec["h"], position_cutoff_hz=20.0, decimation=10, numtaps=41)
+    settings = ProcessingSettings(dt=rec["h"], position_cutoff_hz=20.0, decimation=decimation, numtaps=numtaps)
 
     def fn(q, qd, qdd):
         return ident.regressor(geometry, q, qd, qdd)
