@@ -235,8 +235,8 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     if np.any(BL > BU):  # a row whose range over the prior misses its strip: S is empty (rigorous)
         s_lo, s_up, _ = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol)
         raise inconsistent(max(s_lo, 1.0), s_up)
-    scale = np.concatenate([b, b])
-    res = interval_hull(A, BL, BU, lo, hi, scale=scale, lp_tol=lp_tol)
+    # scale=None: each stacked row's own half-width (BU - BL) / 2, so that "violated" means outside [BL, BU]
+    res = interval_hull(A, BL, BU, lo, hi, lp_tol=lp_tol)
     if res.status == "infeasible" or np.any(res.lower > res.upper):
         s_lo, s_up, theta = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol)
         if s_lo > 1.0:
@@ -244,7 +244,7 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
         factor = max(s_up, 1.0) * (1.0 + 1e-9)  # not proven empty: enclose the slightly larger set
         info["bound_inflated_by"] = factor
         A, BL, BU = stacked(b * factor)
-        res = interval_hull(A, BL, BU, lo, hi, scale=scale * factor, center=theta, lp_tol=lp_tol)
+        res = interval_hull(A, BL, BU, lo, hi, center=theta, lp_tol=lp_tol)
         if res.status != "ok":
             raise RuntimeError("interval-regressor hull LPs infeasible on a set proven non-empty: HiGHS failure")
         info["nonempty_proven"] = True

@@ -93,6 +93,29 @@ def test_vertex_sample_inside_the_interval_hull_when_gaps_are_wide():
     assert np.all(box.lower <= L + 1e-9) and np.all(box.upper >= U - 1e-9)
 
 
+def test_interval_hull_converges_and_is_tight_on_many_rows():
+    """2000 rows: the stacked one-sided rows must not defeat constraint generation (each row's violation is
+    measured against its own finite range); the box equals linprog's hull of the 4000 stacked inequalities."""
+    rng = np.random.default_rng(11)
+    m, p = 2000, 5
+    theta = rng.uniform(0.5, 1.5, p)
+    Wc = rng.standard_normal((m, p)) * 10.0 ** rng.uniform(-1, 1, p)
+    D = rng.uniform(0, 0.05, (m, p)) * np.abs(Wc)
+    y = (Wc + rng.uniform(-1, 1, (m, p)) * D) @ theta + rng.uniform(-0.5, 0.5, m)
+    prior = (np.zeros(p), 3 * np.ones(p))
+    box = uncertain_hull(Wc, D, y, 0.5, prior)
+    assert box.info["converged"] and box.info["working_rows"] < m
+    A = np.vstack([Wc - D, -(Wc + D)])
+    rhs = np.concatenate([y + 0.5, 0.5 - y])
+    for i in range(p):
+        c = np.zeros(p)
+        c[i] = 1.0
+        lo = linprog(c, A_ub=A, b_ub=rhs, bounds=[(0, 3)] * p, method="highs").fun
+        hi = -linprog(-c, A_ub=A, b_ub=rhs, bounds=[(0, 3)] * p, method="highs").fun
+        assert box.lower[i] <= lo + 1e-9 and box.upper[i] >= hi - 1e-9
+        assert box.lower[i] == pytest.approx(lo, abs=1e-7) and box.upper[i] == pytest.approx(hi, abs=1e-7)
+
+
 def test_zero_radius_is_the_point_hull():
     rng = np.random.default_rng(1)
     W = rng.standard_normal((80, 4))
