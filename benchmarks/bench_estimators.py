@@ -15,19 +15,11 @@ import argparse
 import json
 import os
 import statistics
-import sys
 import time
 import tracemalloc
-from pathlib import Path
 
-if "--threads" in sys.argv:  # must be set before numpy loads its BLAS
-    _n = sys.argv[sys.argv.index("--threads") + 1]
-    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[_var] = _n
-
+import _setup  # noqa: F401  (BLAS threads, repository root; before numpy)
 import numpy as np  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import ident  # noqa: E402
 
