@@ -155,8 +155,7 @@ def _write_outliers_report(result: dict, out: Path) -> None:
     relaxed = result["methods"].get("relaxed", {})
     spikes = ", ".join(f"sample {s['sample']} joint {s['joint'] + 1} ({s['value']:+g} N m)" for s in o["injected_samples"])
     lines = [
-        f"# Scenario `{result['scenario']}`: {o['count']} torque spikes of {o['magnitude']:g} N m, q = {o['q']} "
-        f"(seed {result['seed']}{', quick' if result['quick'] else ''})", "",
+        report.heading(result, f"{o['count']} torque spikes of {o['magnitude']:g} N m, q = {o['q']}"), "",
         "The q-relaxed set keeps every parameter vector that satisfies all rows but at most q. Parallel filter: "
         + ("on (a spike spreads over several processed rows; q must count them)" if o["parallel_filter"] else
            "off (one spike = one row: processed rows are the raw samples, bound sized for raw-row derivative errors)"),
@@ -268,8 +267,7 @@ def _write_uncertain_report(result: dict, out: Path) -> None:
     m = result["methods"].get("interval", {})
     enc = u["encoder_radii"]
     lines = [
-        f"# Scenario `{result['scenario']}`: an interval regressor (seed {result['seed']}"
-        f"{', quick' if result['quick'] else ''})", "",
+        report.heading(result, "an interval regressor"), "",
         "The regressor is built from quantised angles through filters; its error is put where it belongs, in an "
         "interval regressor [Wc - D, Wc + D], and the bound keeps only the torque noise and model allowance.", "",
         *report.summary_lines(result), "",

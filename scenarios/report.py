@@ -110,11 +110,17 @@ def summary_lines(result: dict) -> list[str]:
     return lines
 
 
+def heading(result: dict, what: str = "") -> str:
+    """The first line of a run's report: ``# Scenario `name`: what (seed S, quick)``."""
+    quick = ", quick" if result.get("quick") else ""
+    return f"# Scenario `{result['scenario']}`{': ' + what if what else ''} (seed {result['seed']}{quick})"
+
+
 def write_paper_report(result: dict, out: Path, extra: str = "") -> None:
     from sim.dataset import atomic_write_bytes
 
     text = "\n".join([
-        f"# Scenario `{result['scenario']}` (seed {result['seed']}{', quick' if result['quick'] else ''})", "",
+        heading(result), "",
         *summary_lines(result), "",
         "## Table 1: guaranteed boxes (prior [" + f"{result['prior']['lower'][0]}, {result['prior']['upper'][0]}])",
         "", table1(result), "", "## Table 2: weighted least squares", "", table2(result), "",

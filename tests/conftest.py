@@ -19,6 +19,15 @@ def geometry(model):
     return sim.H4Geometry.from_model(model)
 
 
+def bounded_noise_problem(rng, m, p, theta_range=(0.5, 1.5)):
+    """Synthetic bounded-error data: W (m, p) standard normal, theta uniform in ``theta_range``, and
+    y = W theta + e with e uniform in [-1, 1] (so the bound 1 holds). Returns (W, theta, y), drawn in that
+    order from ``rng``."""
+    W = rng.standard_normal((m, p))
+    theta = rng.uniform(*theta_range, p)
+    return W, theta, W @ theta + rng.uniform(-1, 1, m)
+
+
 def random_workspace_poses(rng, n):
     """Poses well inside the workspace: |x|, |y| <= 0.1 m, z in [-0.7, -0.42] m, |theta| <= 0.35 rad."""
     return np.column_stack([

@@ -17,6 +17,7 @@ from scipy.optimize import linprog
 
 import ident
 from ident.hull import chebyshev, interval_hull, safe_lower_bound, strip_bounds
+from tests.conftest import bounded_noise_problem
 
 
 def q(x: float) -> fmpq:
@@ -121,9 +122,7 @@ def test_constraint_generation_on_many_rows_matches_linprog():
     """N = 6000: the working set stays small, yet the result equals the all-rows LP."""
     rng = np.random.default_rng(7)
     n, p = 6000, 14
-    W = rng.standard_normal((n, p))
-    theta = rng.uniform(0.2, 1.8, p)
-    y = W @ theta + rng.uniform(-1, 1, n)
+    W, theta, y = bounded_noise_problem(rng, n, p, theta_range=(0.2, 1.8))
     box = ident.estimate(W, y, 1.0, (np.zeros(p), 2 * np.ones(p)))
     assert box.info["working_rows"] < n / 5
     idx = [0, 5, 13]  # a few coordinates keep linprog's cost down

@@ -18,6 +18,7 @@ from scipy.optimize import linprog
 
 import ident
 from ident.outliers import OutlierBudgetError, detect_outliers, relaxed_hull
+from tests.conftest import bounded_noise_problem
 
 
 def lp_hull(W, y, b, lo, hi):
@@ -107,9 +108,7 @@ def test_certain_outliers_miss_every_feasible_subset(seed):
 def test_gross_outliers_are_certain_and_the_truth_is_enclosed():
     rng = np.random.default_rng(42)
     m, p = 200, 4
-    W = rng.standard_normal((m, p))
-    theta = rng.uniform(0.5, 1.5, p)
-    y = W @ theta + rng.uniform(-1, 1, m)
+    W, theta, y = bounded_noise_problem(rng, m, p)
     bad = np.array([5, 50, 120])
     y[bad] += np.array([8.0, -9.0, 7.0])
     with pytest.raises(ident.InconsistentDataError):
@@ -219,9 +218,7 @@ def test_exact_is_inside_groups_on_a_medium_problem():
     """200 rows, p = 6, 3 outliers under q = 4: the certified search finishes and is inside the groups box."""
     rng = np.random.default_rng(200)
     m, p = 200, 6
-    W = rng.standard_normal((m, p))
-    theta = rng.uniform(0.5, 1.5, p)
-    y = W @ theta + rng.uniform(-1, 1, m)
+    W, theta, y = bounded_noise_problem(rng, m, p)
     bad = rng.choice(m, 3, replace=False)
     y[bad] += rng.choice([-1, 1], 3) * rng.uniform(1.5, 4, 3)
     prior = (np.zeros(p), 3 * np.ones(p))
