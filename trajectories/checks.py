@@ -8,6 +8,8 @@ Checks, in the order used to break ties when two fail at the same sample (:data:
 - ``joint_range``: ``q_range[:, 0] + q_margin <= q <= q_range[:, 1] - q_margin``;
 - ``singularity``: ``cond(Jx) <= max_cond_jx``;
 - ``speed``, ``acceleration``: ``|qd| <= qd_max``, ``|qdd| <= qdd_max``;
+- ``nacelle_speed``, ``nacelle_acceleration``: ``|xd[:3]| <= xd_max``, ``|xdd[:3]| <= xdd_max`` (Euclidean norms of
+  the nacelle's translation, ``xd = J qd``, ``xdd = J qdd + Jd qd``, paper eq. 13; unchecked when infinite);
 - ``torque``: ``|tau| <= torque_margin * tau_max`` with ``tau = ident.inverse_dynamics(theta_nominal, q, qd, qdd)``
   (the paper's model, Coulomb friction ``Fs sign(qd)`` included).
 
@@ -25,12 +27,15 @@ import numpy as np
 
 import ident
 import sim
-from sim.kinematics import _ik  # the unchecked IK: per-sample reach ratio without raising
-from trajectories.limits import InfeasibleTrajectoryError, as_limits, as_theta
+from sim.kinematics import _ik, _jacobian_dot  # unchecked: per-sample reach ratio without raising; Jd
+from trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
+from trajectories.trajectory import Trajectory
 
-CHECKS = ("reach", "consistency", "workspace", "joint_range", "singularity", "speed", "acceleration", "torque")
+CHECKS = ("reach", "consistency", "workspace", "joint_range", "singularity", "speed", "acceleration",
+          "nacelle_speed", "nacelle_acceleration", "torque")
 #: Checks a re-timing can repair (the geometric path is fine, the timing is not).
-TIMING_CHECKS = ("speed", "acceleration", "torque")
+TIMING_CHECKS = ("speed", "acceleration", "nacelle_speed", "nacelle_acceleration", "torque")
+G0 = 9.80665  # standard gravity [m/s^2], for reporting accelerations in g
 CONSISTENCY_TOL = 1e-6  # [rad]
 AXES = ("x", "y", "z", "theta")
 JOINTS = ("q1", "q2", "q3", "q4")
@@ -64,6 +69,9 @@ def _evaluate(geometry, x, q, qd, qdd, limits, theta):
     q_lo, q_hi = limits.q_bounds(geometry)
     jac = sim.jacobians(geometry, q, x=x)
     cond_jx = np.linalg.cond(jac.Jx)[:, None]
+    xd = np.einsum("nab,nb->na", jac.J, qd)
+    xdd = np.einsum("nab,nb->na", jac.J, qdd) + np.einsum("nab,nb->na", _jacobian_dot(geometry, jac, qd), qd)
+    cart = np.stack([np.linalg.norm(xd[:, :3], axis=1), np.linalg.norm(xdd[:, :3], axis=1)], axis=1)
     W = ident.regressor(geometry, q, qd, qdd, x=x)
     tau = (W @ theta).reshape(n, 4)
     inf4 = np.full(4, np.inf)
@@ -79,10 +87,14 @@ def _evaluate(geometry, x, q, qd, qdd, limits, theta):
                "singularity measure"),
         _Check("speed", qd, -vmax, vmax, JOINTS, ("rad/s",) * 4, "joint speed"),
         _Check("acceleration", qdd, -amax, amax, JOINTS, ("rad/s^2",) * 4, "joint acceleration"),
+        _Check("nacelle_speed", cart[:, :1], np.array([-np.inf]), np.array([limits.xd_max]), ("|xd|",),
+               ("m/s",), "nacelle translational speed"),
+        _Check("nacelle_acceleration", cart[:, 1:], np.array([-np.inf]), np.array([limits.xdd_max]), ("|xdd|",),
+               ("m/s^2",), "nacelle translational acceleration"),
         _Check("torque", tau, -tmax, tmax, JOINTS, ("N m",) * 4,
                f"motor torque (nominal parameters; limit {limits.torque_margin:g} x tau_max)"),
     ]
-    return checks, W, tau, cond_jx[:, 0], reach
+    return checks, W, tau, cond_jx[:, 0], reach, cart
 
 
 def _first_violation(check: _Check):
@@ -104,7 +116,7 @@ def check_samples(geometry, t, x, q, qd, qdd, limits=None, theta_nominal=None, r
     limits, theta = as_limits(limits), as_theta(theta_nominal)
     t = np.asarray(t, dtype=float)
     x, q, qd, qdd = (np.asarray(a, dtype=float) for a in (x, q, qd, qdd))
-    checks, W, tau, cond_jx, reach = _evaluate(geometry, x, q, qd, qdd, limits, theta)
+    checks, W, tau, cond_jx, reach, cart = _evaluate(geometry, x, q, qd, qdd, limits, theta)
     violations, first = {}, None
     for order, check in enumerate(checks):
         where, count = _first_violation(check)
@@ -113,6 +125,9 @@ def check_samples(geometry, t, x, q, qd, qdd, limits=None, theta_nominal=None, r
             if first is None or where[0] < first[0][0]:
                 first = (where, check)
     report = _report(t, x, q, qd, qdd, tau, W, cond_jx, reach, limits, theta, geometry)
+    report.update(peak_nacelle_speed=float(cart[:, 0].max()), peak_nacelle_acceleration=float(cart[:, 1].max()),
+                  peak_nacelle_acceleration_g=float(cart[:, 1].max() / G0),
+                  limit_nacelle_speed=limits.to_dict()["xd_max"], limit_nacelle_acceleration=limits.to_dict()["xdd_max"])
     report["violations"] = violations
     report["feasible"] = not violations
     if violations and raise_on_violation:
@@ -166,15 +181,11 @@ def check_trajectory(geometry, traj, limits=None, theta_nominal=None, raise_on_v
 
     ``limits``/``theta_nominal`` default to those stored in the trajectory's parameters, else to the defaults.
     """
-    from trajectories.trajectory import Trajectory  # noqa: PLC0415 (trajectory imports this module lazily)
-
     if not isinstance(geometry, sim.H4Geometry):
         raise TypeError(f"geometry must be a sim.H4Geometry, got {type(geometry).__name__}")
     if not isinstance(traj, Trajectory):
         raise TypeError(f"traj must be a trajectories.Trajectory, got {type(traj).__name__}")
     if limits is None and "limits" in traj.parameters:
-        from trajectories.limits import Limits  # noqa: PLC0415
-
         limits = Limits.from_dict(traj.parameters["limits"])
     if theta_nominal is None and "theta_nominal" in traj.parameters:
         theta_nominal = traj.parameters["theta_nominal"]

@@ -198,9 +198,10 @@ class CoefficientProblem:
             s(self._torque(y)) * dtau / self.tmax[:, None],
         ], axis=1)
 
-    def evaluate(self, z, gradient=False):
-        """log cond(W diag(theta)), constraint values (33,) (max over the grid, <= 0 satisfied) and, with
-        ``gradient``, their derivatives (nz,) and (33, nz). Non-finite designs give log cond = inf."""
+    def evaluate(self, z, gradient=False, with_objective=True):
+        """The criterion (:meth:`objective`), constraint values (33,) (max over the grid, <= 0 satisfied) and,
+        with ``gradient``, their derivatives (nz,) and (33, nz). Non-finite designs give criterion = inf.
+        ``with_objective=False`` (no gradient) skips the criterion and returns 0.0 in its place."""
         z = np.asarray(z, float)
         U = self.inputs(z)
         n = self.n
@@ -217,34 +218,50 @@ class CoefficientProblem:
             return self._failed(gradient)
         if not np.all(np.isfinite(y)):
             return self._failed(gradient)
-        Ws = self._scaled_regressor(y)
-        lam, vec = np.linalg.eigh(Ws.T @ Ws)
-        if lam[0] <= 0:
-            return self._failed(gradient)
-        log_cond = 0.5 * np.log(lam[-1] / lam[0])
         viol = self._violations(y)
         worst = np.argmax(viol, axis=0)
         cons = viol[worst, np.arange(viol.shape[1])]
-        if not gradient:
-            return log_cond, cons
-        dy_du = (Y[1:] - y[None]) / FD_STEP[:, None, None]  # (12, n, 29)
-        if not np.all(np.isfinite(dy_du)):
+        if not with_objective and not gradient:
+            return 0.0, cons
+        dy = None
+        if gradient:
+            dy_du = (Y[1:] - y[None]) / FD_STEP[:, None, None]  # (12, n, 29)
+            if not np.all(np.isfinite(dy_du)):
+                return self._failed(gradient)
+            dy = np.matmul(dy_du.transpose(1, 2, 0), self.B)  # (n, 29, nz)
+        objective = self.objective(y, dy)
+        if objective is None:
             return self._failed(gradient)
-        dy = np.matmul(dy_du.transpose(1, 2, 0), self.B)  # (n, 29, nz)
+        if not gradient:
+            return objective[0], cons
+        value, grad = objective
+        dviol = self._violation_derivatives(y[worst], dy[worst])  # (33 worst samples, 33, nz)
+        dcons = dviol[np.arange(worst.size), np.arange(worst.size)]
+        return value, cons, grad, dcons
+
+    def objective(self, y, dy=None):
+        """The design criterion from the grid outputs y (n, 29) and, if given, dy/dz (n, 29, nz): returns
+        (value, gradient (nz,) or None), or None when the design is degenerate. Here log cond(W diag(theta));
+        subclasses override it (:class:`trajectories.bounded.HalfwidthProblem`)."""
+        Ws = self._scaled_regressor(y)
+        lam, vec = np.linalg.eigh(Ws.T @ Ws)
+        if lam[0] <= 0:
+            return None
+        log_cond = 0.5 * np.log(lam[-1] / lam[0])
+        if dy is None:
+            return log_cond, None
         grad = np.zeros(self.size)
+        th = self.theta
+        tanh_d = (1.0 - np.tanh(y[:, _QD] / SIGN_WIDTH) ** 2) / SIGN_WIDTH
         for idx, lam_i, sign in ((-1, lam[-1], 1.0), (0, lam[0], -1.0)):
             v = vec[:, idx]
             r = self._regressor_times(y, v)  # (n, 4)
-            th = self.theta
-            tanh_d = (1.0 - np.tanh(y[:, _QD] / SIGN_WIDTH) ** 2) / SIGN_WIDTH
             dr = (th[0:4, None] * v[0:4, None] * dy[:, _QDD] + th[4] * v[4] * dy[:, _MNAC]
                   + th[5] * v[5] * dy[:, _IBC]
                   + (th[6:10] * v[6:10])[:, None] * dy[:, _QD]
                   + (th[10:14] * v[10:14])[:, None] * tanh_d[..., None] * dy[:, _QD])
             grad += sign * 0.5 * 2.0 * np.einsum("ni,nij->j", r, dr) / lam_i
-        dviol = self._violation_derivatives(y[worst], dy[worst])  # (33 worst samples, 33, nz)
-        dcons = dviol[np.arange(worst.size), np.arange(worst.size)]
-        return log_cond, cons, grad, dcons
+        return log_cond, grad
 
     def _failed(self, gradient):
         cons = np.full(len(CONSTRAINT_NAMES), np.inf)
@@ -255,8 +272,8 @@ class CoefficientProblem:
         return float(self.evaluate(z)[0])
 
     def feasible(self, z) -> bool:
-        log_cond, cons = self.evaluate(z)
-        return bool(np.isfinite(log_cond) and np.all(cons <= 0.0))
+        value, cons = self.evaluate(z, with_objective=False)
+        return bool(np.isfinite(value) and np.all(cons <= 0.0))
 
     def largest_feasible_scale(self, z, s_max=4.0, steps=30) -> float:
         """Largest s in [0, s_max] (bisection, to 1e-3 relative) with s z feasible; 0 if none is found."""
@@ -282,7 +299,7 @@ class CoefficientProblem:
         return self._cache[1:]
 
     def optimise(self, z0, max_iter: int):
-        """SLSQP from z0: minimise log cond subject to every constraint value <= 0 (scipy: -cons >= 0)."""
+        """SLSQP from z0: minimise the criterion subject to every constraint value <= 0 (scipy: -cons >= 0)."""
         self._cache = None
         return minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
                         options={"maxiter": max_iter, "ftol": 1e-4},

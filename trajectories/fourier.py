@@ -47,13 +47,18 @@ import numpy as np
 
 import ident
 import sim
+from ident.filtering import ProcessingSettings
 from sim.kinematics import _ik, _jacobian_dot, _jacobians  # unchecked, vectorised (no re-validation)
+from trajectories.bounded import HalfwidthProblem, as_targets
 from trajectories.checks import check_samples
 from trajectories.design import CoefficientProblem
 from trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
 from trajectories.trajectory import Trajectory
 
 SPACES = ("cartesian", "joint")
+CRITERIA = ("cond", "h")
+OBJECTIVES = {"cond": "cond(W diag(theta_nominal)), paper's 14-column W on a coarse grid",
+              "h": "smooth max of h_j / target_j (bounded-error half-widths of the processed regressor) on a grid"}
 #: Typical amplitude per axis for the random start [m, m, m, rad] (Cartesian) and per joint [rad] (joint space).
 START_SCALE = {"cartesian": np.array([0.05, 0.05, 0.06, 0.25]), "joint": np.full(4, 0.2)}
 
@@ -158,13 +163,29 @@ def design_from_parameters(parameters: dict, duration=None) -> FourierDesign:
     return FourierDesign(np.asarray(p["a"]), np.asarray(p["b"]), np.asarray(p["centre"]), p["space"], schedule)
 
 
+def as_processing(processing, dt: float) -> ProcessingSettings:
+    """``ProcessingSettings`` from None (defaults at ``dt``), an instance, or a dict of its fields."""
+    if processing is None:
+        return ProcessingSettings(dt=dt)
+    if isinstance(processing, ProcessingSettings):
+        return processing
+    if isinstance(processing, dict):
+        try:
+            return ProcessingSettings(**{"dt": dt, **processing})
+        except TypeError as exc:
+            raise ValueError(f"processing must hold ProcessingSettings fields, got keys {sorted(processing)}: "
+                             f"{exc}") from exc
+    raise TypeError(f"processing must be None, an ident.filtering.ProcessingSettings or a dict, got "
+                    f"{type(processing).__name__}")
+
+
 def _time_grid(duration: float, dt: float) -> np.ndarray:
     n = int(round(duration / dt)) + 1
     return np.arange(n) * dt
 
 
 def _check_args(duration, harmonics, base_hz, seed, dt, slow_ratio, slow_fraction, ramp_s, transition_s, space,
-                design_factor, max_iter):
+                design_factor, max_iter, criterion="cond"):
     def number(name, value, ok, expected):
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
                 or not math.isfinite(value) or not ok(value):
@@ -186,13 +207,16 @@ def _check_args(duration, harmonics, base_hz, seed, dt, slow_ratio, slow_fractio
         raise TypeError(f"seed must be an int or None, got {seed!r}")
     if space not in SPACES:
         raise ValueError(f"space must be one of {SPACES}, got {space!r}")
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
 
 
 def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, base_hz: float = 0.5, seed: int = 0,
                        optimise: bool = True, limits=None, theta_nominal=None, *, dt: float = 1e-3,
                        slow_ratio: float = 0.2, slow_fraction: float = 0.3, ramp_s: float = 0.5,
                        transition_s: float = 0.5, space: str = "cartesian", design_factor: float = 0.95,
-                       max_iter: int = 60, grid_per_period: int = 12) -> Trajectory:
+                       max_iter: int = 60, grid_per_period: int = 12, criterion: str = "cond", processing=None,
+                       targets=None) -> Trajectory:
     """An exciting trajectory of ``duration`` [s] sampled at ``dt`` [s] (see the module docstring).
 
     harmonics : H, number of harmonics per axis; base_hz : wanted fundamental frequency in the fast phase [Hz]
@@ -203,7 +227,11 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
     duration; ramp_s, transition_s : durations of the rest-to-slow / fast-to-rest ramps and of the slow-to-fast
     transition [s]; space : ``"cartesian"`` (default) or ``"joint"``; design_factor : limits are multiplied by
     it on the optimiser's coarse grid; max_iter : SLSQP iterations; grid_per_period : coarse-grid samples per
-    period of the highest harmonic in the fast phase.
+    period of the highest harmonic in the fast phase; criterion : ``"cond"`` (log cond(W diag(theta_nominal)),
+    the default) or ``"h"`` (bounded-error: smooth max of the relative half-widths h_j / targets_j,
+    :mod:`trajectories.bounded`); processing : ``ident.filtering.ProcessingSettings`` or a dict of its fields
+    (the identification's speed threshold and filter window, used by ``"h"``); targets : (14,) for ``"h"``
+    (default the nominal parameters).
 
     Returns a :class:`Trajectory` (kind ``"fourier"``) that passed :func:`trajectories.check_trajectory`; its
     ``parameters`` hold the coefficients, the schedule, the seed, the limits and the optimisation record
@@ -214,7 +242,7 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
     if not isinstance(geometry, sim.H4Geometry):
         raise TypeError(f"geometry must be a sim.H4Geometry, got {type(geometry).__name__}")
     _check_args(duration, harmonics, base_hz, seed, dt, slow_ratio, slow_fraction, ramp_s, transition_s, space,
-                design_factor, max_iter)
+                design_factor, max_iter, criterion)
     limits, theta = as_limits(limits), as_theta(theta_nominal)
     t_start = time.perf_counter()
     t_full = _time_grid(duration, dt)
@@ -224,13 +252,21 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
     schedule = PhaseSchedule.slow_fast(T, slow_fraction, slow_ratio, ramp_s, transition_s, cycles / shape.total)
     fast_hz = float(schedule.levels.max())
     n_grid = max(100, int(math.ceil(grid_per_period * harmonics * fast_hz * T)) + 1)
+    if criterion == "h":  # h_j is a supremum over the rows: keep >= 36 rows/s per joint (tests: within ~20 %)
+        n_grid = max(n_grid, int(math.ceil(36 * T)) + 1)
     t_grid = np.linspace(0.0, T, n_grid)
     centre = np.asarray(geometry.x_home, float) if space == "cartesian" else \
         sim.inverse_kinematics(geometry, geometry.x_home)
     scale = START_SCALE[space]
     phi, phid, phidd = schedule(t_grid)
-    prob = CoefficientProblem(geometry, space, centre, fourier_basis(harmonics, phi), phid, phidd, scale, limits,
-                              theta, design_factor)
+    args = (geometry, space, centre, fourier_basis(harmonics, phi), phid, phidd, scale, limits, theta, design_factor)
+    if criterion == "cond":
+        prob = CoefficientProblem(*args)
+    else:
+        settings = as_processing(processing, dt)
+        prob = HalfwidthProblem(*args, targets=as_targets(targets, len(ident.PARAMETER_NAMES)),
+                                speed_threshold=settings.speed_threshold,
+                                half_window_s=0.5 * (settings.taps().size - 1) * dt)
 
     def design(z):
         ab = np.asarray(z).reshape(2, harmonics, 4) * scale
@@ -244,8 +280,9 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
         raise InfeasibleTrajectoryError("no feasible amplitude found for the random start: the limits leave no room "
                                         "around home (check limits and theta_nominal)")
     z_start = 0.9 * s0 * z0  # strictly inside the constraints
-    cond_start = math.exp(prob.log_cond(z_start))
-    record = {"cond_start": cond_start, "start_scale": 0.9 * s0, "optimised": bool(optimise)}
+    crit_start = prob.log_cond(z_start)
+    record = {"criterion": criterion, "criterion_start": crit_start, "start_scale": 0.9 * s0,
+              "optimised": bool(optimise)}
     z = z_start
     if optimise and max_iter > 0:
         res = prob.optimise(z_start, max_iter)
@@ -253,10 +290,12 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
         if not prob.feasible(z):  # SLSQP's last iterate may sit slightly outside: shrink onto the feasible side
             record["shrink_after_optimisation"] = prob.largest_feasible_scale(z, s_max=1.0)
             z = record["shrink_after_optimisation"] * z
-        if math.exp(prob.log_cond(z)) >= cond_start:  # keep the start if the optimiser did not improve it
+        if prob.log_cond(z) >= crit_start:  # keep the start if the optimiser did not improve it
             z = z_start
         record.update(nit=int(res.nit), nfev=int(res.nfev), message=str(res.message))
-    record["cond_optimised"] = math.exp(prob.log_cond(z))
+    record["criterion_optimised"] = prob.log_cond(z)
+    if criterion == "cond":
+        record["cond_start"], record["cond_optimised"] = math.exp(crit_start), math.exp(record["criterion_optimised"])
 
     final_scale = 1.0
     for _attempt in range(20):  # the coarse grid can miss peaks between its samples
@@ -276,7 +315,7 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
         "duration": T, "dt": dt, "cycles": cycles, "base_hz_requested": float(base_hz), "base_hz": fast_hz,
         "slow_ratio": slow_ratio, "slow_fraction": slow_fraction, "ramp_s": ramp_s, "transition_s": transition_s,
         "schedule_knots": schedule.knots, "schedule_levels": schedule.levels, "seed": seed,
-        "objective": "cond(W diag(theta_nominal)), paper's 14-column W on a coarse grid", "grid_points": n_grid,
+        "objective": OBJECTIVES[criterion], "criterion": criterion, "grid_points": n_grid,
         "design_factor": design_factor, "optimisation": record, "limits": limits.to_dict(),
         "theta_nominal": theta, "parameter_names": list(ident.PARAMETER_NAMES),
     }

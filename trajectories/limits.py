@@ -18,6 +18,33 @@ motor torque        |tau| <= 0.8 x 15 N m           paper sec. 4.2: +-15 N m mea
                                                     the controller's authority and the error budget
 ==================  ==============================  ==========================================================
 
+H4-class envelope (:meth:`Limits.h4_class`, used by :func:`trajectories.design_excitation`). The defaults
+above reach about 1.1 m/s and 1.3 g, far below what the H4 family does; narrow guaranteed boxes need the
+motion's amplitude (the bounded-error half-widths shrink in proportion to it, see
+:mod:`trajectories.bounded`). Sources and placeholders:
+
+==================  ==============================  ==========================================================
+limit               H4-class value                  source / reason
+==================  ==============================  ==========================================================
+nacelle speed       |xd[:3]| <= 5.5 m/s             Par4, the H4's successor (Nabat, Company, Krut & Pierrot,
+                                                    "Par4: very high speed parallel robot for pick-and-place",
+                                                    IROS 2005; IEEE T-RO optimal-design paper): 5.5 m/s reached
+nacelle accel.      |xdd[:3]| <= 165 m/s^2 (16.8 g)  same source: 165 m/s^2 reached. No H4 figure was found
+                                                    (Pierrot, Marquet, Company & Gil, ICRA 2001 give none we
+                                                    could read): the Par4 figures are used as a ceiling
+joint speed         |qd| <= 30 rad/s                placeholder: 9 m/s at the 0.3 m arm tip of models/h4.xml,
+                                                    enough for the nacelle's 5.5 m/s through J
+joint acceleration  |qdd| <= 2000 rad/s^2           placeholder: 600 m/s^2 at the arm tip; in practice the
+                                                    torque limit binds first (Imot 0.012 kg m^2 alone needs
+                                                    24 N m at 2000 rad/s^2)
+motor torque        |tau| <= 0.8 x 15 N m           models/h4.xml actuator ctrlrange/forcerange +-15 N m (the
+                                                    paper's measurement range, sec. 4.2); 3 N m kept: 1.5 N m
+                                                    for the torque error the bound allows and 1.5 N m of
+                                                    feedback authority for the joint controller
+workspace box       as above                        placeholder (no public H4 workspace figures)
+singularity         cond(Jx) <= 100                 as above (the closed loops' exactness is checked below 100)
+==================  ==============================  ==========================================================
+
 The torque check uses the paper's model ``ident.inverse_dynamics`` on a nominal parameter vector
 (:func:`nominal_parameters`): the paper's a-priori values (Table 1: Imot = 0.012 kg m^2, Mnac = 1.0 kg),
 Ibc = 0.003 kg m^2 (Table 2's estimate 0.0030; Table 1's a-priori 0.0008 is smaller and would under-state the
@@ -88,6 +115,8 @@ class Limits:
 
     x_lower, x_upper : (4,) workspace box on the nacelle pose (x, y, z, theta) [m, m, m, rad];
     q_margin : distance kept from ``geometry.q_range`` at both ends [rad];
+    xd_max, xdd_max : nacelle translational speed [m/s] and acceleration [m/s^2] caps (Euclidean norm of the
+    x, y, z part of ``J qd`` and ``J qdd + Jd qd``; default inf: unchecked);
     max_cond_jx : upper bound on cond(Jx) (2-norm);
     qd_max : (4,) or scalar joint speed limit [rad/s]; qdd_max : joint acceleration limit [rad/s^2];
     tau_max : motor torque range [N m]; torque_margin : fraction of ``tau_max`` a trajectory may use.
@@ -101,6 +130,15 @@ class Limits:
     qdd_max: tuple[float, ...] = field(default=(150.0,) * 4)
     tau_max: tuple[float, ...] = field(default=(15.0,) * 4)
     torque_margin: float = 0.8
+    xd_max: float = math.inf
+    xdd_max: float = math.inf
+
+    @classmethod
+    def h4_class(cls, **overrides) -> "Limits":
+        """The H4-class performance envelope (module docstring: sources and placeholders); keyword overrides."""
+        values = dict(qd_max=(30.0,) * 4, qdd_max=(2000.0,) * 4, xd_max=5.5, xdd_max=165.0)
+        values.update(overrides)
+        return cls(**values)
 
     def __post_init__(self) -> None:
         for name in ("x_lower", "x_upper"):
@@ -122,6 +160,12 @@ class Limits:
         if not (math.isfinite(self.max_cond_jx) and self.max_cond_jx >= 1.0):
             raise ValueError(f"Limits.max_cond_jx must be finite and >= 1, got {self.max_cond_jx!r}")
         object.__setattr__(self, "max_cond_jx", float(self.max_cond_jx))
+        for name in ("xd_max", "xdd_max"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                    or math.isnan(value) or value <= 0:
+                raise ValueError(f"Limits.{name} must be a number > 0 (inf: unchecked), got {value!r}")
+            object.__setattr__(self, name, float(value))
 
     @property
     def tau_allowed(self) -> np.ndarray:
@@ -137,11 +181,14 @@ class Limits:
         return lo, hi
 
     def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+        """JSON-ready (infinite caps become the string ``"inf"``)."""
+        return {k: (list(v) if isinstance(v, tuple) else ("inf" if v == math.inf else v))
+                for k, v in asdict(self).items()}
 
     @classmethod
     def from_dict(cls, data: dict) -> "Limits":
-        return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items()})
+        return cls(**{k: (tuple(v) if isinstance(v, list) else (math.inf if v == "inf" else v))
+                      for k, v in data.items()})
 
 
 def as_limits(limits) -> Limits:

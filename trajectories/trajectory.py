@@ -88,17 +88,12 @@ class Trajectory:
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
 
-    def report(self, geometry=None, limits=None, theta_nominal=None) -> dict:
-        """The check report: cond(W) (raw, scaled, normalised), peak |qd|, |qdd|, |tau| per joint vs limits,
-        margins to the workspace box and joint range, max cond(Jx), violations.
-
-        Without ``geometry``: the report stored when the trajectory was made. With it: recomputed (no raise).
-        """
-        if geometry is None:
-            return json.loads(json.dumps(self.checks))
-        from trajectories.checks import check_trajectory  # noqa: PLC0415
-
-        return check_trajectory(geometry, self, limits, theta_nominal, raise_on_violation=False)
+    def report(self) -> dict:
+        """The check report stored when the trajectory was made (a copy): cond(W) (raw, scaled, normalised), peak
+        |qd|, |qdd|, |tau| per joint vs limits, margins to the workspace box and joint range, max cond(Jx),
+        violations. To recompute it for another geometry or limits use :func:`trajectories.check_trajectory`
+        (the data type does not depend on its checks)."""
+        return json.loads(json.dumps(self.checks))
 
     def summary(self) -> str:
         """A few human-readable lines of the stored report."""

@@ -82,12 +82,29 @@ def test_kind_and_parameters_are_checked():
         tj.Trajectory(kind="manual", parameters={"f": object()}, **_arrays())
 
 
-def test_arrays_are_read_only_and_report_recomputes(geometry, short_excitation):
+def test_arrays_are_read_only_and_check_trajectory_recomputes_the_report(geometry, short_excitation):
     with pytest.raises(ValueError):
         short_excitation.q[0, 0] = 1.0
     stored = short_excitation.report()
-    again = short_excitation.report(geometry)
+    again = tj.check_trajectory(geometry, short_excitation, raise_on_violation=False)
     assert stored["feasible"] and again["feasible"]
     for key in ("cond_W_scaled", "max_cond_jx", "min_workspace_margin_m"):
         assert again[key] == pytest.approx(stored[key], rel=1e-12)
     assert "cond(W diag(theta_nom))" in short_excitation.summary()
+
+
+
+def test_the_data_type_does_not_import_its_checks():
+    """No import circle: trajectories.trajectory imports nothing from trajectories.checks (read from its AST)."""
+    import ast  # noqa: PLC0415
+    import inspect  # noqa: PLC0415
+
+    import trajectories.trajectory as module  # noqa: PLC0415
+
+    imported = set()
+    for node in ast.walk(ast.parse(inspect.getsource(module))):
+        if isinstance(node, ast.ImportFrom):
+            imported.add(node.module)
+        elif isinstance(node, ast.Import):
+            imported.update(a.name for a in node.names)
+    assert not any(m and m.startswith("trajectories") for m in imported), imported

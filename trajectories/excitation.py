@@ -1,0 +1,152 @@
+"""The scenario layer's entry point: :func:`design_excitation`, a bounded-error (or cond) optimised excitation
+under the H4-class envelope, cached on disk by its inputs.
+
+Cache. A design takes seconds to tens of seconds; campaigns and reruns ask for the same ones. Entries live in
+``$H4BENCH_CACHE/trajectories`` if the environment variable ``H4BENCH_CACHE`` is set, else in
+``$XDG_CACHE_HOME/h4bench/trajectories`` (default ``~/.cache/h4bench/trajectories``). The key is the SHA-256 of
+every input that changes the result: the geometry's arrays, the limits, seed, duration, criterion, processing
+settings, targets, nominal parameters, the remaining design options and the source code of the design modules
+(:data:`CODE_FILES`, so an edit invalidates old entries). Files are written atomically (temp file +
+``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
+and inputs, and passes :func:`trajectories.check_trajectory` again on the caller's geometry and limits;
+otherwise it is recomputed and overwritten (never trusted).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, fields
+from pathlib import Path
+
+import numpy as np
+
+import ident
+import sim
+from trajectories.bounded import as_targets
+from trajectories.checks import check_trajectory
+from trajectories.fourier import CRITERIA, as_processing, fourier_excitation
+from trajectories.limits import Limits, as_limits, as_theta
+from trajectories.trajectory import Trajectory
+
+CACHE_ENV = "H4BENCH_CACHE"
+#: Source files whose content enters the cache key.
+CODE_FILES = ("bounded.py", "checks.py", "design.py", "excitation.py", "fourier.py", "limits.py", "trajectory.py")
+#: Defaults of :func:`design_excitation` (fast phase fundamental and harmonics chosen for the H4-class envelope:
+#: torque-limited rather than workspace-limited; measured in benchmarks/bench_design.py).
+DEFAULT_OPTIONS = {"harmonics": 4, "base_hz": 0.75}
+
+
+def cache_dir() -> Path:
+    """The trajectory cache folder (module docstring); not created here."""
+    root = os.environ.get(CACHE_ENV)
+    if root:
+        return Path(root).expanduser() / "trajectories"
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    return base / "h4bench" / "trajectories"
+
+
+def _code_hash() -> str:
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in CODE_FILES:
+        h.update(name.encode())
+        h.update((here / name).read_bytes())
+    return h.hexdigest()
+
+
+def geometry_hash(geometry) -> str:
+    """SHA-256 of every field of a :class:`sim.H4Geometry` (arrays as float64/int64 bytes, with shapes)."""
+    h = hashlib.sha256()
+    for f in fields(geometry):
+        value = getattr(geometry, f.name)
+        arr = np.asarray(value)
+        arr = arr.astype(np.float64 if arr.dtype.kind == "f" else np.int64)
+        h.update(f.name.encode())
+        h.update(str(arr.shape).encode())
+        h.update(np.ascontiguousarray(arr).tobytes())
+    return h.hexdigest()
+
+
+def cache_inputs(geometry, duration, seed, limits, criterion, processing, targets, theta_nominal, options) -> dict:
+    """The JSON-ready inputs that identify a design (what the key hashes)."""
+    return {
+        "geometry": geometry_hash(geometry), "code": _code_hash(), "duration": float(duration), "seed": int(seed),
+        "limits": limits.to_dict(), "criterion": criterion, "processing": asdict(processing),
+        "targets": None if targets is None else [float(v) for v in targets],
+        "theta_nominal": [float(v) for v in theta_nominal], "options": options,
+    }
+
+
+def cache_key(inputs: dict) -> str:
+    return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
+
+
+def _load_valid(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Trajectory | None:
+    try:
+        traj = Trajectory.load(path)
+    except Exception:  # noqa: BLE001 - any unreadable entry is recomputed
+        return None
+    meta = traj.parameters.get("cache", {})
+    if meta.get("key") != key or meta.get("inputs") != json.loads(json.dumps(inputs)):
+        return None
+    try:
+        report = check_trajectory(geometry, traj, limits, theta, raise_on_violation=False)
+    except Exception:  # noqa: BLE001
+        return None
+    return traj if report["feasible"] else None
+
+
+def design_excitation(geometry, duration: float = 10.0, seed: int = 0, limits=None, criterion: str = "h",
+                      processing=None, targets=None, cache: bool = True, *, theta_nominal=None,
+                      harmonics: int | None = None, base_hz: float | None = None, **options) -> Trajectory:
+    """An optimised exciting trajectory for bounded-error identification (see :mod:`trajectories.bounded`).
+
+    geometry : :class:`sim.H4Geometry`; duration [s]; seed : seeds the start; limits : :class:`Limits`
+    (default :meth:`Limits.h4_class`, the H4-class envelope); criterion : ``"h"`` (smooth max of the relative
+    bounded-error half-widths on the processed regressor) or ``"cond"``; processing :
+    ``ident.filtering.ProcessingSettings`` or a dict of its fields (the scenario's ``[processing]`` table; default
+    ``ProcessingSettings()``); targets : (14,) > 0, default the nominal parameters; cache : look up / store the
+    design in :func:`cache_dir`; theta_nominal : (14,) for the torque check (default
+    ``trajectories.nominal_parameters()``); harmonics, base_hz : default :data:`DEFAULT_OPTIONS`; other keyword
+    options go to :func:`trajectories.fourier_excitation` (dt, slow_ratio, max_iter, ...).
+
+    Returns a :class:`Trajectory` (kind ``"fourier"``) that passed every check; ``parameters["cache"]`` holds
+    the key, the inputs and whether it came from the cache (``parameters["cache"]["hit"]`` is not stored).
+    """
+    if not isinstance(geometry, sim.H4Geometry):
+        raise TypeError(f"geometry must be a sim.H4Geometry, got {type(geometry).__name__}")
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
+    if not isinstance(cache, bool):
+        raise TypeError(f"cache must be a bool, got {type(cache).__name__}")
+    limits = Limits.h4_class() if limits is None else as_limits(limits)
+    theta = as_theta(theta_nominal)
+    dt = float(options.get("dt", 1e-3))
+    settings = as_processing(processing, dt)
+    if targets is not None:
+        targets = as_targets(targets, len(ident.PARAMETER_NAMES))
+    opts = dict(DEFAULT_OPTIONS)
+    if harmonics is not None:
+        opts["harmonics"] = harmonics
+    if base_hz is not None:
+        opts["base_hz"] = base_hz
+    opts.update(options)
+    inputs = cache_inputs(geometry, duration, seed, limits, criterion, settings, targets, theta, opts)
+    key = cache_key(inputs)
+    path = cache_dir() / f"{key}.npz"
+    if cache and path.is_file():
+        hit = _load_valid(path, key, inputs, geometry, limits, theta)
+        if hit is not None:
+            return hit
+    traj = fourier_excitation(geometry, duration=duration, seed=seed, limits=limits, theta_nominal=theta,
+                              criterion=criterion, processing=settings, targets=targets, **opts)
+    params = dict(traj.parameters, cache={"key": key, "inputs": inputs})
+    traj = Trajectory(t=traj.t, x=traj.x, q=traj.q, qd=traj.qd, qdd=traj.qdd, kind=traj.kind, parameters=params,
+                      checks=traj.checks)
+    if cache:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        traj.save(path)
+    return traj
