@@ -1,73 +1,128 @@
-"""Monte Carlo campaigns: many experiments over seeds, noise shapes, trajectories and randomised true
-parameters, on a local process pool or a Dask cluster (``scheduler`` address), resumable.
+"""The campaign engine shared by the campaign kinds (``enclosure``, ``enclosure_critical``): many independent runs
+of a job on a local process pool or a Dask cluster, resumable, with provenance, and safe to interrupt.
 
-Each finished run is written at once to ``<out>/runs/<index>.json`` (atomically); a restarted campaign skips
-the indices already there, so nothing finished is redone or lost. ``result.json`` and the report are written
-only when every run is in, and removed at the start, so a partial campaign never looks complete.
+- Each finished run is written at once to ``<out>/runs/<index>.json`` (atomically) with its *provenance*: the
+  hash of the spec (without the run count and where it runs), the base seed, the hash of the model file, the
+  code's version and source hash. ``<out>/campaign.json`` holds the campaign's provenance. A restarted campaign
+  reuses only runs whose provenance matches and says how many; a folder holding a campaign of other inputs is
+  refused (:class:`CampaignMismatchError`) unless ``fresh`` recomputes it.
+- ``result.json`` and the report are written only when every run is in, and removed at the start, so a partial
+  campaign never looks complete.
+- Ctrl-C (SIGINT) or SIGTERM stops the campaign within seconds: queued runs are cancelled, workers are
+  terminated, what finished is kept, and :class:`CampaignInterrupted` says how to resume. Workers die with the
+  campaign even when it is killed (SIGKILL): each worker asks the kernel for a signal when its parent dies
+  (Linux ``PR_SET_PDEATHSIG``) and watches its parent process as a fallback.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import copy
+import ctypes
+import hashlib
+import importlib.metadata
 import json
 import os
+import signal
+import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 
 import sim
+from scenarios.rundir import prepare_folder, write_json
 from scenarios.spec import ScenarioError
 
-METHODS_SUMMARY_KEYS = ("all_enclosed", "width", "seconds", "status")
+_PACKAGES = ("sim", "ident", "trajectories", "scenarios")
+# spec keys that do not change what a run computes
+_NOT_INPUTS = {"name", "description", "quick", "quick_applied"}
+_NOT_CAMPAIGN_INPUTS = {"runs", "workers", "scheduler"}
 
 
-def campaign_experiment(spec: dict, index: int, base_seed: int):
-    """The experiment of run ``index`` of a campaign: seed ``base_seed + index``, the index's noise shape,
-    true parameters randomised with that seed. Returns (ExperimentRun, noise shape)."""
-    from scenarios.experiment import run_experiment
-
-    camp = spec["campaign"]
-    seed = base_seed + index
-    spec_i = copy.deepcopy(spec)
-    shapes = camp["noise_shapes"]
-    spec_i["noise"]["shape"] = shapes[index % len(shapes)]
-    path = spec["model"] or None
-    model = sim.randomised_model(seed, camp["parameter_spread"], path) if camp["parameter_spread"] > 0 \
-        else sim.load_model(path)
-    return run_experiment(spec_i, seed, model=model, model_path=path), spec_i["noise"]["shape"]
+class CampaignMismatchError(ScenarioError):
+    """The output folder holds a campaign computed from other inputs."""
 
 
-def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
-    """One run of a campaign (a top-level function: picklable for process pools and Dask)."""
-    run, shape = campaign_experiment(spec, index, base_seed)
-    result = run.result()
-    result["index"] = index
-    result["noise_shape"] = shape
-    return result
+class CampaignInterrupted(ScenarioError):
+    """The campaign was stopped (Ctrl-C, SIGTERM); finished runs are saved and it can be resumed."""
 
 
-def replay_one(spec: dict, index: int, base_seed: int, out: Path, progress) -> dict:
-    """Re-run run ``index`` of a campaign alone and write a full run folder (dataset, truth, report, replay),
-    e.g. to inspect a miss; ``out`` is an atomic temporary folder."""
-    from scenarios import report
-    from scenarios.runner import _save_run_files
-
-    progress(f"run {index}", 0, 1)
-    spec = copy.deepcopy(spec)
-    spec["replay"]["enabled"] = True
-    run, shape = campaign_experiment(spec, index, base_seed)
-    _save_run_files(run, out, progress)
-    result = run.result()
-    result["index"] = index
-    result["noise_shape"] = shape
-    report.plot_boxes(result, out / "boxes.png")
-    report.write_paper_report(result, out, extra=f"Run {index} of campaign `{spec['name']}` (noise {shape}).")
-    return result
+# ------------------------------------------------------------------------------------------------ provenance
+def _sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
 
 
-def _run_path(out: Path, index: int) -> Path:
-    return out / "runs" / f"{index:04d}.json"
+_CODE_HASH: str | None = None
+
+
+def code_hash() -> str:
+    """SHA-256 over the source of the project's packages and models (computed once per process)."""
+    global _CODE_HASH
+    if _CODE_HASH is None:
+        h = hashlib.sha256()
+        for pkg in _PACKAGES:
+            module = sys.modules.get(pkg) or __import__(pkg)
+            root = Path(module.__file__).parent
+            for f in sorted(root.rglob("*.py")) + sorted(root.rglob("*.toml")):
+                h.update(str(f.relative_to(root.parent)).encode())
+                h.update(f.read_bytes())
+        _CODE_HASH = h.hexdigest()
+    return _CODE_HASH
+
+
+def model_hash(path: str | Path | None) -> str:
+    """SHA-256 of the MJCF file a campaign loads and of the XML files beside it (includes, scene)."""
+    path = Path(path) if path else Path(sim.DEFAULT_MODEL_PATH)
+    h = hashlib.sha256()
+    for f in [path] + sorted(p for p in path.parent.glob("*.xml") if p != path):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def provenance(spec: dict, seed: int) -> dict:
+    """What a campaign's runs are computed from (a dict; equal dicts mean reusable runs)."""
+    inputs = {k: v for k, v in spec.items() if k not in _NOT_INPUTS}
+    inputs["campaign"] = {k: v for k, v in spec["campaign"].items() if k not in _NOT_CAMPAIGN_INPUTS}
+    try:
+        version = importlib.metadata.version("h4bench")
+    except importlib.metadata.PackageNotFoundError:
+        version = None
+    return {
+        "spec_hash": _sha256_bytes(json.dumps(inputs, sort_keys=True, default=str).encode()),
+        "seed": int(seed),
+        "model_hash": model_hash(spec["model"] or None),
+        "version": version,
+        "code_hash": code_hash(),
+    }
+
+
+def _differences(saved: dict, now: dict) -> list[str]:
+    return [f"{k} (saved {saved.get(k)!r}, now {now.get(k)!r})" for k in now if saved.get(k) != now.get(k)]
+
+
+# ------------------------------------------------------------------------------------------------ workers
+def _watch_parent(parent: int) -> None:
+    while True:
+        if os.getppid() != parent:
+            os._exit(3)
+        time.sleep(0.5)
+
+
+def _worker_init(parent: int) -> None:
+    """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL("libc.so.6", use_errno=True)
+            libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except OSError:
+            pass
+    if os.getppid() != parent:
+        os._exit(3)
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
 
 
 def _executor(camp: dict):
@@ -82,42 +137,129 @@ def _executor(camp: dict):
             raise ScenarioError(f"the Dask scheduler at {camp['scheduler']!r} does not answer: {exc}") from exc
         return client.get_executor(), client
     workers = camp["workers"] or max(1, (os.cpu_count() or 1))
-    return concurrent.futures.ProcessPoolExecutor(max_workers=workers), None
+    return concurrent.futures.ProcessPoolExecutor(max_workers=workers, initializer=_worker_init,
+                                                  initargs=(os.getpid(),)), None
 
 
-def run_campaign(spec: dict, seed: int, out: Path, progress) -> dict:
-    from scenarios.runner import write_json
+def _stop_executor(executor) -> None:
+    """Cancel what is queued and end the workers now (a process pool's shutdown would wait for them)."""
+    for proc in list(getattr(executor, "_processes", {}).values() or []):
+        try:
+            proc.terminate()
+        except (OSError, AttributeError):
+            pass
+    executor.shutdown(wait=False, cancel_futures=True)
 
+
+class _TermAsInterrupt:
+    """SIGTERM raises KeyboardInterrupt in the main thread while a campaign runs (same clean stop as Ctrl-C)."""
+
+    def __enter__(self):
+        self.previous = None
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGTERM, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            signal.signal(signal.SIGTERM, self.previous)
+
+
+# ------------------------------------------------------------------------------------------------ the engine
+def run_path(out: Path, index: int) -> Path:
+    return out / "runs" / f"{index:04d}.json"
+
+
+def _load_run(path: Path, prov: dict) -> dict | None:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return data if data.get("provenance") == prov else None
+
+
+def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = False) -> tuple[list[dict], dict]:
+    """Run ``job(spec, index, seed) -> dict`` for every index of ``spec['campaign']['runs']`` into ``out``,
+    resuming what matches; returns (runs in index order, info with ``reused``, ``computed``, ``seconds``,
+    ``runs_per_minute``). ``job`` must be a picklable top-level function."""
     camp = spec["campaign"]
-    n = int(camp["runs"])
-    if n < 1:
-        raise ScenarioError(f"campaign.runs must be >= 1, got {n}")
-    out = Path(out)
-    (out / "runs").mkdir(parents=True, exist_ok=True)
+    n = camp["runs"]
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ScenarioError(f"campaign.runs must be an integer >= 1, got {n!r}")
+    prov = provenance(spec, seed)
+    out = prepare_folder(out, what={"scenario": spec["name"], "kind": spec["kind"]})
+    saved_path = out / "campaign.json"
+    if saved_path.is_file() and not fresh:
+        try:
+            saved = json.loads(saved_path.read_text()).get("provenance", {})
+        except ValueError:
+            saved = {}
+        diff = _differences(saved, prov)
+        if diff:
+            raise CampaignMismatchError(
+                f"--out {str(out)!r} holds a campaign computed from other inputs: {'; '.join(diff)}. Use --fresh to "
+                "recompute it there, or another --out")
+    (out / "runs").mkdir(exist_ok=True)
+    if fresh:
+        for f in (out / "runs").glob("*.json"):
+            f.unlink()
     for stale in ("result.json", "report.md"):
         (out / stale).unlink(missing_ok=True)
-    todo = [i for i in range(n) if not _run_path(out, i).is_file()]
-    progress("campaign", n - len(todo), n)
+    write_json(saved_path, {"provenance": prov, "scenario": spec["name"], "kind": spec["kind"]})
+    runs: dict[int, dict] = {}
+    for i in range(n):
+        if run_path(out, i).is_file():
+            r = _load_run(run_path(out, i), prov)
+            if r is not None:
+                runs[i] = r
+    reused = len(runs)
+    todo = [i for i in range(n) if i not in runs]
+    progress(f"campaign (reused {reused})" if reused else "campaign", reused, n)
+    started = time.perf_counter()
     if todo:
         executor, client = _executor(camp)
+        futures = {}
+        interrupted = False
         try:
-            with executor:
-                futures = {executor.submit(campaign_job, spec, i, seed): i for i in todo}
-                for k, fut in enumerate(concurrent.futures.as_completed(futures)):
+            with _TermAsInterrupt():
+                futures = {executor.submit(job, spec, i, seed): i for i in todo}
+                for fut in concurrent.futures.as_completed(futures):
                     i = futures[fut]
-                    write_json(_run_path(out, i), fut.result())
-                    progress("campaign", n - len(todo) + k + 1, n)
+                    result = fut.result()
+                    result["provenance"] = prov
+                    write_json(run_path(out, i), result)
+                    runs[i] = result
+                    progress(f"campaign (reused {reused})" if reused else "campaign", len(runs), n)
+        except KeyboardInterrupt:
+            interrupted = True
+            for fut in futures:
+                fut.cancel()
+            if client is None:
+                _stop_executor(executor)
+            raise CampaignInterrupted(
+                f"interrupted: {len(runs)} of {n} runs are saved in {str(out)!r}; run the same command again to "
+                "resume") from None
         finally:
             if client is not None:
                 client.close()
-    runs = [json.loads(_run_path(out, i).read_text()) for i in range(n)]
-    result = summarise(spec, seed, runs)
-    write_report(result, runs, out)
-    write_json(out / "result.json", result)
-    return result
+            elif not interrupted:
+                executor.shutdown(wait=True, cancel_futures=True)
+    seconds = time.perf_counter() - started
+    computed = len(todo)
+    info = {"reused": reused, "computed": computed, "seconds": seconds,
+            "runs_per_minute": 60.0 * computed / seconds if computed and seconds > 0 else None,
+            "workers": camp["workers"] or (os.cpu_count() or 1), "scheduler": camp["scheduler"] or None,
+            "provenance": prov}
+    return [runs[i] for i in range(n)], info
 
 
-def summarise(spec: dict, seed: int, runs: list[dict]) -> dict:
+def summarise_methods(runs: list[dict]) -> dict:
+    """Per method over the runs: misses (and those where the bound covered the residual), failed runs,
+    median and p90 relative widths (width / |true|), median seconds."""
     first = runs[0]
     methods = {}
     for name in first["methods"]:
@@ -125,7 +267,7 @@ def summarise(spec: dict, seed: int, runs: list[dict]) -> dict:
         enclosed = np.array([r["methods"][name]["enclosed"] for r in ok]) if ok else np.zeros((0, len(first["true"])))
         misses = [r["seed"] for r in ok if not r["methods"][name]["all_enclosed"]]
         misses_covered = [r["seed"] for r in ok if not r["methods"][name]["all_enclosed"] and r["bound_covers_residual"]]
-        rel_w = np.array([np.asarray(r["methods"][name]["width"]) / np.asarray(r["true"]) for r in ok])
+        rel_w = np.array([np.asarray(r["methods"][name]["width"]) / np.abs(np.asarray(r["true"])) for r in ok])
         methods[name] = {
             "status": "ok",
             "lower": first["methods"][name].get("lower"),
@@ -140,30 +282,20 @@ def summarise(spec: dict, seed: int, runs: list[dict]) -> dict:
             "relative_width_p90": np.percentile(rel_w, 90, axis=0).tolist() if len(ok) else [],
             "seconds": float(np.median([r["methods"][name]["seconds"] for r in runs])),
         }
-    return {
-        "scenario": spec["name"], "kind": "enclosure", "seed": seed, "quick": spec.get("quick_applied", False),
-        "model": first["model"], "parameters": first["parameters"], "true": first["true"],
-        "bound": first["bound"], "runs": len(runs),
-        "min_consistent_bound": float(max(r["min_consistent_bound"] for r in runs)),
-        "oracle_residual": float(max(r["oracle_residual"] for r in runs)),
-        "runs_bound_covers_residual": int(sum(r["bound_covers_residual"] for r in runs)),
-        "noise_shapes": spec["campaign"]["noise_shapes"], "parameter_spread": spec["campaign"]["parameter_spread"],
-        "methods": methods,
-    }
+    return methods
 
 
-def write_report(result: dict, runs: list[dict], out: Path) -> None:
+def plot_relative_widths(result: dict, runs: list[dict], path: Path) -> None:
+    """Box plots of the relative widths per parameter and method over the runs (log scale)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sim.dataset import atomic_write_bytes
-
     names = result["parameters"]
     fig, axes = plt.subplots(1, len(result["methods"]), figsize=(7 * len(result["methods"]), 5), squeeze=False)
     for ax, (name, m) in zip(axes[0], result["methods"].items()):
-        rel = [np.asarray(r["methods"][name]["width"]) / np.asarray(r["true"]) for r in runs
+        rel = [np.asarray(r["methods"][name]["width"]) / np.abs(np.asarray(r["true"])) for r in runs
                if r["methods"][name].get("status") == "ok"]
         if rel:
             ax.boxplot(np.array(rel), tick_labels=names)
@@ -172,17 +304,13 @@ def write_report(result: dict, runs: list[dict], out: Path) -> None:
         ax.tick_params(axis="x", rotation=60)
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out / "widths.png", dpi=110)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
-    lines = [f"# Scenario `{result['scenario']}`: is the truth always enclosed?", "",
-             f"- runs: {result['runs']} (noise shapes {result['noise_shapes']}, true parameters randomised by "
-             f"+-{100 * result['parameter_spread']:.0f} %)",
-             f"- bound covers the oracle residual in {result['runs_bound_covers_residual']} of {result['runs']} runs "
-             f"(max oracle residual {result['oracle_residual']:.4g} N m)"]
-    for name, m in result["methods"].items():
-        lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']}; misses where the bound covered the "
-                     f"residual (must be none): {m['misses_with_bound_covering_residual']}; median {m['seconds']:.3g} s")
-    lines += ["", f"Inspect one run (a miss, say) with its dataset and Rerun replay: `h4bench run {result['scenario']} "
-              f"--seed {result['seed']} --only INDEX` (run INDEX has seed {result['seed']} + INDEX).", "",
-              "Plot: `widths.png`."]
-    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
+
+
+def campaign_spec(spec: dict, index: int) -> dict:
+    """The spec of run ``index``: the index's noise shape (cycling through ``campaign.noise_shapes``)."""
+    spec_i = copy.deepcopy(spec)
+    shapes = spec["campaign"]["noise_shapes"]
+    spec_i["noise"]["shape"] = shapes[index % len(shapes)]
+    return spec_i

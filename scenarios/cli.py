@@ -125,7 +125,8 @@ def run(
 @app.command()
 def scenarios() -> None:
     """List the scenarios."""
-    from scenarios.spec import available, load_spec
+    from scenarios.registry import load_spec
+    from scenarios.spec import available
 
     for name in available():
         spec = load_spec(name)

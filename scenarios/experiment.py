@@ -183,3 +183,17 @@ def estimate_boxes(run: ExperimentRun) -> None:
         t0 = time.perf_counter()
         run.wls = ident.wls(eq.W, eq.y, joints=4, names=eq.names, joint_of_row=eq.joint)
         run.seconds["wls"] = time.perf_counter() - t0
+
+
+def estimate_hull(run: ExperimentRun) -> None:
+    """The ordinary hull on the run's equation: a box, or the failure message when the set is proven empty."""
+    eq = run.equation
+    t0 = time.perf_counter()
+    run.min_consistent_bound = float(ident.min_consistent_bound(eq.W, eq.y, run.prior))
+    t1 = time.perf_counter()
+    try:
+        run.boxes["hull"] = ident.estimate(eq.W, eq.y, eq.bound, run.prior, method="hull")
+    except ident.InconsistentDataError as exc:
+        run.failures["hull"] = str(exc)
+    run.seconds["hull"] = time.perf_counter() - t1
+    run.seconds["min_consistent_bound"] = t1 - t0

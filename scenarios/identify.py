@@ -11,6 +11,7 @@ import ident
 import sim
 from ident.filtering import ProcessingSettings
 from ident.processing import build_equation
+from scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 from scenarios.spec import DEFAULTS
 
 METHODS = ("hull", "cgsp", "wls")
@@ -18,8 +19,6 @@ METHODS = ("hull", "cgsp", "wls")
 
 def identify_csv(path, bound: float, method: str = "hull", prior=(0.0, 2.0), model=None, out=None) -> dict:
     """Identify the 14 parameters from a CSV log under the raw-row bound ``bound`` [N m]."""
-    from scenarios.runner import RUNS_DIR, _AtomicDir, write_json
-
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if not (np.isfinite(bound) and bound > 0):
@@ -27,6 +26,7 @@ def identify_csv(path, bound: float, method: str = "hull", prior=(0.0, 2.0), mod
     lo, hi = prior
     if not lo < hi:
         raise ValueError(f"prior lower must be < upper, got ({lo}, {hi})")
+    out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
     dataset = sim.Dataset.from_csv(path)
     geometry = sim.H4Geometry.from_model(sim.load_model(model))
     settings = ProcessingSettings(dt=dataset.dt, **DEFAULTS["processing"])
@@ -52,7 +52,6 @@ def identify_csv(path, bound: float, method: str = "hull", prior=(0.0, 2.0), mod
                                          "seconds": time.perf_counter() - t0}
         except ident.InconsistentDataError as exc:
             result["methods"][method] = {"status": "failed", "message": str(exc), "seconds": time.perf_counter() - t0}
-    out = Path(out) if out is not None else RUNS_DIR / result["scenario"]
-    with _AtomicDir(out) as tmp:
+    with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         write_json(tmp / "result.json", result)
     return result

@@ -130,6 +130,29 @@ def write_paper_report(result: dict, out: Path, extra: str = "") -> None:
     atomic_write_bytes(out / "report.md", text.encode())
 
 
+def hull_verdict(result: dict) -> str:
+    """What the plain hull did on a run built to make it fail (proven empty, a miss, or enclosed)."""
+    m = result["methods"]["hull"]
+    if m["status"] != "ok":
+        return "fails: the feasible set is proven empty (InconsistentDataError)"
+    if not m["all_enclosed"]:
+        missed = [n for n, e in zip(result["parameters"], m["enclosed"]) if not e]
+        return f"fails: its box misses the true value of {missed}"
+    return "encloses the truth (the failure this scenario is built to show did not happen)"
+
+
+def relative_width_table(result: dict) -> str:
+    """Markdown table: median (and p90) relative width per parameter and method of a campaign result."""
+    methods = {k: m for k, m in result["methods"].items() if m.get("relative_width_median")}
+    head = "| parameter | " + " | ".join(f"{k} median | {k} p90" for k in methods) + " |"
+    sep = "|---|" + "---:|---:|" * len(methods)
+    rows = [head, sep]
+    for j, name in enumerate(result["parameters"]):
+        cells = [f"{m['relative_width_median'][j]:.3g} | {m['relative_width_p90'][j]:.3g}" for m in methods.values()]
+        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
 def plot_boxes(result: dict, path: Path, title: str | None = None) -> None:
     """One row per parameter: each method's box divided by the true value, the truth at 1."""
     import matplotlib

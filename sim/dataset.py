@@ -51,7 +51,7 @@ def _save_npz(path: Path, arrays: dict) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def _json_default(obj):
+def json_default(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, (np.floating, np.integer, np.bool_)):
@@ -122,7 +122,7 @@ class Dataset:
     def save(self, path) -> Path:
         stem = _stem(path)
         _save_npz(stem.with_suffix(".npz"), {"t": self.t, "q": self.q, "tau": self.tau})
-        atomic_write_bytes(stem.with_suffix(".json"), json.dumps(self.metadata, indent=2, default=_json_default).encode())
+        atomic_write_bytes(stem.with_suffix(".json"), json.dumps(self.metadata, indent=2, default=json_default).encode())
         return stem.with_suffix(".npz")
 
     @classmethod

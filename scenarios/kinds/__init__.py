@@ -1,0 +1,1 @@
+"""Scenario kinds, one module each (see :mod:`scenarios.registry`)."""

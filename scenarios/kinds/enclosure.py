@@ -1,0 +1,109 @@
+"""Kind ``enclosure``: a Monte Carlo campaign over seeds, noise shapes, trajectories and randomised true
+parameters: is the truth always enclosed? Runs on a local process pool or a Dask cluster, resumable (see
+:mod:`scenarios.campaign`); ``only`` re-runs one index alone with its dataset, report and replay.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+import sim
+from scenarios import report
+from scenarios.campaign import campaign_spec, plot_relative_widths, run_many, summarise_methods
+from scenarios.experiment import run_experiment
+from scenarios.rundir import OwnedFolder, save_run_files, write_json
+from scenarios.spec import ScenarioError
+from sim.dataset import atomic_write_bytes
+
+DESCRIPTION = "Monte Carlo over seeds, noise shapes, trajectories and true parameters: is the truth always enclosed?"
+RESUMABLE = True
+
+
+def campaign_experiment(spec: dict, index: int, base_seed: int):
+    """The experiment of run ``index``: seed ``base_seed + index``, the index's noise shape, true parameters
+    randomised with that seed. Returns (ExperimentRun, noise shape)."""
+    seed = base_seed + index
+    spec_i = campaign_spec(spec, index)
+    path = spec["model"] or None
+    spread = spec["campaign"]["parameter_spread"]
+    model = sim.randomised_model(seed, spread, path) if spread > 0 else sim.load_model(path)
+    return run_experiment(spec_i, seed, model=model, model_path=path), spec_i["noise"]["shape"]
+
+
+def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
+    """One run of the campaign (a top-level function: picklable for process pools and Dask)."""
+    run_, shape = campaign_experiment(spec, index, base_seed)
+    result = run_.result()
+    result["index"] = index
+    result["noise_shape"] = shape
+    return result
+
+
+def replay_one(spec: dict, index: int, base_seed: int, out: Path, progress) -> dict:
+    """Re-run run ``index`` alone and write a full run folder (dataset, truth, report, replay) into ``out``."""
+    progress(f"run {index}", 0, 1)
+    spec = {**spec, "replay": {**spec["replay"], "enabled": True}}
+    run_, shape = campaign_experiment(spec, index, base_seed)
+    save_run_files(run_, out, progress)
+    result = run_.result()
+    result["index"] = index
+    result["noise_shape"] = shape
+    report.plot_boxes(result, out / "boxes.png")
+    report.write_paper_report(result, out, extra=f"Run {index} of campaign `{spec['name']}` (noise {shape}).")
+    return result
+
+
+def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fresh: bool = False) -> dict:
+    """The campaign into ``out`` (resumable), or with ``only`` the one run of that index into
+    ``<out>/run-<index>/`` with its dataset, report and replay."""
+    if only is not None:
+        if not 0 <= only < spec["campaign"]["runs"]:
+            raise ScenarioError(f"only must be a run index in [0, {spec['campaign']['runs']}), got {only}")
+        with OwnedFolder(Path(out) / f"run-{only:04d}", option="--only") as tmp:
+            result = replay_one(spec, only, seed, tmp, progress)
+            write_json(tmp / "result.json", result)
+        return result
+    runs, info = run_many(spec, seed, out, campaign_job, progress, fresh=fresh)
+    result = summarise(spec, seed, runs)
+    result["campaign"] = info
+    plot_relative_widths(result, runs, Path(out) / "widths.png")
+    write_report(result, Path(out))
+    write_json(Path(out) / "result.json", result)
+    return result
+
+
+def summarise(spec: dict, seed: int, runs: list[dict]) -> dict:
+    first = runs[0]
+    return {
+        "scenario": spec["name"], "kind": "enclosure", "seed": seed, "quick": spec.get("quick_applied", False),
+        "model": first["model"], "parameters": first["parameters"], "true": first["true"],
+        "bound": first["bound"], "runs": len(runs),
+        "min_consistent_bound": float(max(r["min_consistent_bound"] for r in runs)),
+        "oracle_residual": float(max(r["oracle_residual"] for r in runs)),
+        "runs_bound_covers_residual": int(sum(r["bound_covers_residual"] for r in runs)),
+        "noise_shapes": spec["campaign"]["noise_shapes"], "parameter_spread": spec["campaign"]["parameter_spread"],
+        "methods": summarise_methods(runs),
+    }
+
+
+def write_report(result: dict, out: Path) -> None:
+    info = result["campaign"]
+    lines = [f"# Scenario `{result['scenario']}`: is the truth always enclosed?", "",
+             f"- runs: {result['runs']} (noise shapes {result['noise_shapes']}, true parameters randomised by "
+             f"+-{100 * result['parameter_spread']:.0f} %); reused from an earlier start: {info['reused']}",
+             f"- bound covers the oracle residual in {result['runs_bound_covers_residual']} of {result['runs']} runs "
+             f"(max oracle residual {result['oracle_residual']:.4g} N m)"]
+    if info["runs_per_minute"]:
+        lines.append(f"- throughput: {info['runs_per_minute']:.3g} runs per minute ({info['computed']} runs in "
+                     f"{info['seconds']:.4g} s on {info['scheduler'] or str(info['workers']) + ' local worker(s)'})")
+    for name, m in result["methods"].items():
+        lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']}; misses where the bound covered the "
+                     f"residual (must be none): {m['misses_with_bound_covering_residual']}; median {m['seconds']:.3g} s")
+    lines += ["", "## Median relative width (width / |true value|) per parameter", "",
+              report.relative_width_table(result), "",
+              f"Inspect one run (a miss, say) with its dataset and Rerun replay: `h4bench run {result['scenario']} "
+              f"--seed {result['seed']} --only INDEX` (run INDEX has seed {result['seed']} + INDEX).", "",
+              "Plot: `widths.png`."]
+    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
