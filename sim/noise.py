@@ -40,7 +40,8 @@ is shorthand for the table with that amplitude and default settings::
     torque_limit = 15.0                              # N m (gain bound and quantiser range)
 
 Components are realised in the fixed order uniform, square, sine, drift, ripple, gain whatever the order of the
-keys, so a seed reproduces a realisation. :func:`realistic_drive` is a documented mix with total bound 1.0 N m.
+keys, so a seed reproduces a realisation. :func:`realistic_drive` is a documented mix with total bound 1.0 N m;
+the table ``{preset = "realistic_drive", bound = 1.0}`` (optionally with torque_limit, quantisation_lsb) builds it.
 """
 
 from __future__ import annotations
@@ -407,16 +408,20 @@ class ErrorStream:
         self._ripple_components = [r for r, _ in ripples]
         self._gain_components = [c for _, c in gains]
         self._quantiser = quantiser
+        self._fixed = not (self._ripple or self._gain)
 
     def at(self, k: int, q, tau_cmd) -> np.ndarray:
         """Error (4,) [N m] at sample k: the motors apply ``tau_cmd + at(k, q, tau_cmd)``.
 
         k : sample index in [0, n); q : (4,) true motor angles [rad]; tau_cmd : (4,) commanded torque after
-        clipping [N m] (|tau_cmd| <= torque_limit when a gain error is present). Returns a new array.
+        clipping [N m] (|tau_cmd| <= torque_limit when a gain error is present). Returns a new array, or a
+        read-only row of :attr:`state_independent` when no component depends on q or tau_cmd.
         """
         try:
             if k < 0:
                 raise IndexError
+            if self._fixed:  # nothing depends on the state: the precomputed row (a read-only view)
+                return self.state_independent[k]
             e0, e1, e2, e3 = self._pre[k]
         except (IndexError, TypeError):
             raise NoiseModelError(f"k must be an integer sample index in [0, {self.n}), got {k!r}") from None
@@ -479,7 +484,8 @@ class ErrorStream:
 # ------------------------------------------------------------------------------------------------- model
 
 
-_SPEC_KEYS = ("uniform", "square", "sine", "drift", "ripple", "gain", "quantisation_lsb", "torque_limit")
+_SPEC_KEYS = ("uniform", "square", "sine", "drift", "ripple", "gain", "quantisation_lsb", "torque_limit", "preset",
+              "bound")
 
 
 def _table(value, key: str, known: tuple[str, ...], shorthand: str) -> dict:
@@ -571,6 +577,12 @@ class TorqueError:
         if unknown:
             raise NoiseModelError(f"unknown key(s) {unknown} in the torque-error spec (known: {list(_SPEC_KEYS)})")
         limit = _real(spec.get("torque_limit", TORQUE_LIMIT), "torque_limit", positive=True)
+        if "preset" in spec or "bound" in spec:
+            extra = sorted(set(spec) - {"preset", "bound", "torque_limit", "quantisation_lsb"})
+            if spec.get("preset") != "realistic_drive" or extra:
+                raise NoiseModelError("spec['preset'] must be 'realistic_drive', with only bound, torque_limit and "
+                                      f"quantisation_lsb beside it, got preset {spec.get('preset')!r} and {extra}")
+            return realistic_drive(spec.get("bound", 1.0), limit, spec.get("quantisation_lsb", LOG_LSB))
         comps = []
         if "uniform" in spec:
             comps.append(Uniform(**_table(spec["uniform"], "uniform", ("amplitude",), "amplitude")))

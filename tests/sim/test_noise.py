@@ -234,6 +234,10 @@ def test_realistic_drive_preset():
     assert parts["quantisation"] == 2.0**-8
     assert parts["uniform"] == pytest.approx(1.0 - sum(v for k, v in parts.items() if k != "uniform"), abs=1e-15)
     assert N.realistic_drive(0.5).bound == 0.5
+    assert N.TorqueError.from_spec({"preset": "realistic_drive", "bound": 0.5}).describe() == \
+        N.realistic_drive(0.5).describe()
+    with pytest.raises(N.NoiseModelError, match="spec\\['preset'\\] must be 'realistic_drive'"):
+        N.TorqueError.from_spec({"preset": "realistic_drive", "uniform": 0.1})
     with pytest.raises(N.NoiseModelError, match="bound must leave room"):
         N.realistic_drive(0.001)
 
@@ -292,6 +296,14 @@ def test_bad_inputs_raise_clear_errors():
     with pytest.raises(E, match=r"tau_cmd must lie within \+-torque_limit"):
         s.measured(np.full((5, 4), 16.0))
     np.testing.assert_array_equal(s.at(0, [0.0] * 4, [1.0] * 4), s.at(0, np.zeros(4), np.ones(4)))  # lists too
+    values = np.random.default_rng(0).uniform(-0.2, 0.2, (5, 4))
+    given = N.TorqueError([N.Samples(values, bound=0.2)])
+    with pytest.raises(E, match=r"samples values must have shape \(6, 4\)"):
+        given.start(_t(6), np.random.default_rng(0))
+    row = given.start(_t(5), np.random.default_rng(0)).at(2, np.zeros(4), np.zeros(4))
+    np.testing.assert_array_equal(row, values[2])
+    with pytest.raises(ValueError, match="read-only"):  # the precomputed row cannot be altered by the caller
+        row[0] = 1.0
 
 
 # ------------------------------------------------------------------------------------------- filtering
