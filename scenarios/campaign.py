@@ -114,6 +114,7 @@ def _watch_parent(parent: int) -> None:
 def _worker_init(parent: int) -> None:
     """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the campaign's handler (inherited through fork)
     if sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL("libc.so.6", use_errno=True)
@@ -143,12 +144,19 @@ def _executor(camp: dict):
 
 def _stop_executor(executor) -> None:
     """Cancel what is queued and end the workers now (a process pool's shutdown would wait for them)."""
-    for proc in list(getattr(executor, "_processes", {}).values() or []):
+    procs = list((getattr(executor, "_processes", None) or {}).values())
+    for proc in procs:
         try:
             proc.terminate()
         except (OSError, AttributeError):
             pass
-    executor.shutdown(wait=False, cancel_futures=True)
+    deadline = time.monotonic() + 3.0
+    for proc in procs:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
+    executor.shutdown(wait=True, cancel_futures=True)
 
 
 class _TermAsInterrupt:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
+import io
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Optional
@@ -18,9 +21,37 @@ app = typer.Typer(
 )
 
 
+@contextlib.contextmanager
+def native_output_to_stderr():
+    """While a command runs, whatever native code (a solver's banner, a C library) writes to file descriptor 1
+    goes to standard error; the command's own output (``typer.echo``, rich) still reaches standard output. So
+    ``--json`` prints exactly one JSON document on stdout."""
+    try:
+        stdout_fd = sys.stdout.fileno()
+    except (AttributeError, OSError, io.UnsupportedOperation):
+        stdout_fd = None  # e.g. a test runner's captured stdout: only the native fd 1 needs moving
+    sys.stdout.flush()
+    saved = os.dup(1)
+    previous = sys.stdout
+    try:
+        os.dup2(2, 1)
+        if stdout_fd == 1:
+            sys.stdout = io.TextIOWrapper(io.FileIO(saved, "w", closefd=False), encoding=previous.encoding or "utf-8",
+                                          line_buffering=True)
+        yield
+    finally:
+        try:
+            sys.stdout.flush()
+        finally:
+            sys.stdout = previous
+            os.dup2(saved, 1)
+            os.close(saved)
+
+
 @app.callback()
-def main() -> None:
+def main(ctx: typer.Context) -> None:
     """h4bench: simulate the H4, identify its 14 dynamic parameters with guaranteed boxes, check them."""
+    ctx.with_resource(native_output_to_stderr())
 
 
 def _fail(message: str) -> None:
@@ -105,16 +136,25 @@ def run(
     scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address for campaigns (host:port)"),
     workers: Optional[int] = typer.Option(None, help="local worker processes for campaigns"),
     only: Optional[int] = typer.Option(None, help="campaigns: re-run this run index alone, with its replay"),
+    fresh: bool = typer.Option(False, "--fresh", help="campaigns: recompute every run instead of resuming"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
+    from scenarios.campaign import CampaignInterrupted
     from scenarios.runner import run_scenario
 
     try:
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
-                                  scheduler=scheduler, workers=workers, only=only)
+                                  scheduler=scheduler, workers=workers, only=only, fresh=fresh)
+    except CampaignInterrupted as exc:
+        typer.secho(f"stopped: {exc}", fg=typer.colors.YELLOW, err=True)
+        raise typer.Exit(130)
     except ValueError as exc:  # ScenarioError, ModelError, DatasetError, InconsistentDataError, ...
         _fail(str(exc))
+    except KeyboardInterrupt:
+        typer.secho("stopped: interrupted; nothing of this run was kept (run folders are written whole or not at all)",
+                    fg=typer.colors.YELLOW, err=True)
+        raise typer.Exit(130)
     if as_json:
         typer.echo(json.dumps(result, indent=2, default=str))
     else:

@@ -81,6 +81,12 @@ def check_target(target: Path, option: str = "--out") -> Path:
         raise RunFolderError(f"{option} {str(target)!r} cannot be created: {exc.strerror or exc}") from exc
     if not os.access(parent, os.W_OK | os.X_OK):
         raise RunFolderError(f"{option} {str(target)!r} cannot be written: no write permission on {str(parent)!r}")
+    if not target.exists():  # the place must really take a folder (e.g. /proc does not): try, then remove ours
+        try:
+            target.mkdir()
+            target.rmdir()
+        except OSError as exc:
+            raise RunFolderError(f"{option} {str(target)!r} cannot be created: {exc.strerror or exc}") from exc
     return target
 
 

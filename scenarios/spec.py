@@ -65,6 +65,31 @@ def _merge(base: dict, override: dict, where: str) -> dict:
     return out
 
 
+BOX_METHODS = ("hull", "cgsp")  # the set-membership methods of ident.estimate
+NOISE_SHAPES = ("uniform", "square", "sine", "none")  # the simulator's named shapes a spec can choose
+
+
+def _check_list(value, where: str, allowed: tuple[str, ...], allow_empty: bool) -> None:
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ScenarioError(f"{where} must be a list of strings from {allowed}, got {value!r}")
+    if not value and not allow_empty:
+        raise ScenarioError(f"{where} must not be empty (choose from {allowed})")
+    unknown = [v for v in value if v not in allowed]
+    if unknown:
+        raise ScenarioError(f"{where} must be a list of strings from {allowed}, got unknown {unknown}")
+
+
+def _check_lists(spec: dict) -> None:
+    _check_list(spec["estimators"]["methods"], "estimators.methods", BOX_METHODS, allow_empty=True)
+    _check_list(spec["campaign"]["noise_shapes"], "campaign.noise_shapes", NOISE_SHAPES, allow_empty=False)
+    if spec["noise"]["shape"] not in NOISE_SHAPES:
+        raise ScenarioError(f"noise.shape must be one of {NOISE_SHAPES}, got {spec['noise']['shape']!r}")
+    factors = spec["sweep"]["factors"]
+    if not isinstance(factors, list) or not factors or not all(
+            isinstance(f, (int, float)) and not isinstance(f, bool) and f > 0 for f in factors):
+        raise ScenarioError(f"sweep.factors must be a non-empty list of numbers > 0, got {factors!r}")
+
+
 def available() -> list[str]:
     return sorted(p.stem for p in SPEC_DIR.glob("*.toml"))
 
@@ -95,6 +120,7 @@ def load_spec(name_or_path: str | Path, quick: bool = False, kinds: tuple[str, .
     if kinds is not None and kind not in kinds:
         raise ScenarioError(f"kind must be one of {tuple(kinds)}, got {spec['kind']!r}")
     spec["kind"] = kind
+    _check_lists(spec)
     if spec["noise"]["bound"] < 0 or spec["bound"]["allowance"] < 0:
         raise ScenarioError("noise.bound and bound.allowance must be >= 0 [N m]")
     if spec["prior"]["lower"] >= spec["prior"]["upper"]:

@@ -8,7 +8,23 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-DEFAULT_MODEL_PATH = Path(__file__).resolve().parent.parent / "models" / "h4.xml"
+
+
+def models_dir() -> Path:
+    """The folder of the shipped MJCF files: ``models/`` of a source checkout, else the installed package data
+    (``h4bench_models``, the same files, packaged by pyproject.toml)."""
+    checkout = Path(__file__).resolve().parent.parent / "models"
+    if (checkout / "h4.xml").is_file():
+        return checkout
+    import importlib.util
+
+    spec = importlib.util.find_spec("h4bench_models")
+    if spec is not None and spec.submodule_search_locations:
+        return Path(next(iter(spec.submodule_search_locations)))
+    return checkout
+
+
+DEFAULT_MODEL_PATH = models_dir() / "h4.xml"
 MOTOR_JOINTS = ("q1", "q2", "q3", "q4")
 NACELLE_JOINTS = ("x", "y", "z", "theta")
 FOREARM_TENDONS = ("forearm1", "forearm2", "forearm3", "forearm4")
