@@ -17,11 +17,13 @@ the box). Inputs are validated here; errors name the argument, what was expected
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
 from ident.cgsp import cgsp
 from ident.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
+from ident.lpsolver import LPError, LPFallbackWarning
 from ident.parameters import PARAMETER_NAMES, Box
 
 __all__ = [
@@ -167,8 +169,20 @@ def identifiability(W: np.ndarray, names, *, rcond: float = 1e-7, gram=None) -> 
 
 
 # ------------------------------------------------------------------------------------------ consistency
-def _inconsistent(W, y, b, scalar, lo, hi, scale_lower) -> InconsistentDataError:
-    min_bound = chebyshev(W, y, np.ones_like(y), lo, hi).upper
+def _min_bound(W, y, lo, hi, center=None) -> float:
+    """Rigorous upper bound of the smallest consistent scalar bound: the Chebyshev LP, or, if HiGHS fails on
+    it, the residual at ``center`` (default the prior's midpoint), rounded up (larger, still consistent)."""
+    try:
+        return float(chebyshev(W, y, np.ones_like(y), lo, hi, center=center).upper)
+    except LPError as exc:
+        c = np.clip(0.5 * lo + 0.5 * hi if center is None else center, lo, hi)
+        warnings.warn(f"min_bound: {exc}; using the residual at the least-squares point (an upper bound)",
+                      LPFallbackWarning, stacklevel=3)
+        return scaled_residual_upper(W, y, np.ones_like(y), c)
+
+
+def _inconsistent(W, y, b, scalar, lo, hi, scale_lower, center=None) -> InconsistentDataError:
+    min_bound = _min_bound(W, y, lo, hi, center)
     given = float(b[0]) if scalar else float(np.max(b))
     if scalar:
         msg = (
@@ -195,15 +209,28 @@ def min_consistent_bound(W, y, prior) -> float:
     """
     W, y = _check_W_y(W, y)
     lo, hi, _ = _check_prior(prior, W.shape[1])
-    return float(chebyshev(W, y, np.ones_like(y), lo, hi).upper)
+    G = W.T @ W
+    return _min_bound(W, y, lo, hi, _least_squares_center(G, W, y, lo, hi))
 
 
 # ------------------------------------------------------------------------------------------------ estimate
-def _least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi) -> np.ndarray:
+def _least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=None) -> np.ndarray:
+    """Least squares of the rows weighted by ``1 / b`` (G = W^T W when b is None or constant), clipped to
+    the prior; column-equilibrated, so the point does not depend on the units of rows or parameters."""
+    if b is not None and np.any(b != b[0]):
+        G = np.zeros_like(G)
+        rhs = np.zeros(W.shape[1])
+        for s in range(0, W.shape[0], 8192):
+            Wb = W[s : s + 8192] / b[s : s + 8192, None]
+            G += Wb.T @ Wb
+            rhs += Wb.T @ (y[s : s + 8192] / b[s : s + 8192])
+    else:
+        rhs = W.T @ y
     d = np.sqrt(np.diag(G))
     d[d == 0.0] = 1.0
-    rhs = (W.T @ y) / d
-    sol = np.linalg.lstsq(G / d[:, None] / d[None, :], rhs, rcond=1e-12)[0] / d
+    with np.errstate(all="ignore"):
+        sol = np.linalg.lstsq(G / d[:, None] / d[None, :], rhs / d, rcond=1e-12)[0] / d
+    sol = np.where(np.isfinite(sol), sol, 0.5 * lo + 0.5 * hi)
     return np.clip(sol, lo, hi)
 
 
@@ -238,30 +265,47 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     info: dict = {"method": method}
     info.update(identifiability(W, names, gram=G))
 
-    center = _least_squares_center(G, W, y, lo, hi)
+    center = _least_squares_center(G, W, y, lo, hi, None if scalar else b)
+
+    def fallback(what: str) -> None:
+        info.setdefault("fallbacks", []).append(what)
+        warnings.warn(f"estimate: {what}", LPFallbackWarning, stacklevel=3)
 
     def check_consistency_by_lp():
-        """Chebyshev LP with weights b: raise if S is proven empty, else record whether it is proven non-empty."""
-        ch = chebyshev(W, y, b, lo, hi, center=center)
+        """Chebyshev LP with weights b: raise if S is proven empty, else record whether it is proven non-empty.
+        Returns None (and warns) when HiGHS cannot solve it: nothing is proven either way."""
+        try:
+            ch = chebyshev(W, y, b, lo, hi, center=center)
+        except LPError as exc:
+            info["nonempty_proven"] = False
+            info["nearly_inconsistent"] = True
+            fallback(f"consistency not decided ({exc})")
+            return None
         info["consistency_scale"] = (ch.lower, ch.upper)
         if ch.lower > 1.0:
-            raise _inconsistent(W, y, b, scalar, lo, hi, ch.lower)
+            raise _inconsistent(W, y, b, scalar, lo, hi, ch.lower, center)
         info["nonempty_proven"] = ch.upper <= 1.0  # ch.theta satisfies every row exactly
         info["nearly_inconsistent"] = not info["nonempty_proven"]
         return ch
 
     if method == "hull":
         res = interval_hull(W, bl, bu, lo, hi, scale=b, center=center)
-        if res.status == "infeasible" or np.any(res.lower > res.upper):
+        crossed = res.status == "ok" and bool(np.any(res.lower > res.upper))  # rigorous: S is empty
+        if res.status == "infeasible" or crossed:
             ch = check_consistency_by_lp()
+            if ch is None and crossed:
+                raise _inconsistent(W, y, b, scalar, lo, hi, 1.0, center)
             # not proven empty: HiGHS's verdict is within its tolerance. Enclose S in the slightly larger
-            # S' (bounds scaled by > max(s_upper, 1)), which is non-empty: still an outer box of S.
-            factor = max(ch.upper, 1.0) * (1.0 + 1e-9)
+            # S' (bounds scaled by > max(s_upper, 1)), which is non-empty: still an outer box of S. Without
+            # the Chebyshev LP, s_upper is the (rigorous, larger) scaled residual at the least-squares point.
+            s_up, theta = (ch.upper, ch.theta) if ch is not None else (scaled_residual_upper(W, y, b, center), center)
+            factor = max(s_up, 1.0) * (1.0 + 1e-9)
             info["bound_inflated_by"] = factor
             bl, bu = strip_bounds(y, b * factor)
-            res = interval_hull(W, bl, bu, lo, hi, scale=b * factor, center=ch.theta)
-            if res.status != "ok":
-                raise RuntimeError("hull LPs infeasible on a set proven non-empty: HiGHS numerical failure")
+            res = interval_hull(W, bl, bu, lo, hi, scale=b * factor, center=theta)
+            if res.status != "ok" or np.any(res.lower > res.upper):
+                fallback("the hull LPs failed on a set known to be non-empty; the box is the prior")
+                res.lower, res.upper = lo.copy(), hi.copy()
         else:
             # a rigorous feasibility check of the mean of the 2p LP solutions proves S non-empty cheaply;
             # failing that (S very thin or empty within the LP tolerance), the Chebyshev LP decides
@@ -271,13 +315,20 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
                 info["nearly_inconsistent"] = False
             else:
                 check_consistency_by_lp()
+        if res.info["lp_failures"]:
+            failed = sorted({names[j % p] for j in res.info["lp_failures"]})
+            fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
+                     "their endpoints are coarser safe bounds or the prior's")
         lower, upper = res.lower, res.upper
         info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "lp_failures", "converged")})
     else:
         res = cgsp(W, bl, bu, lo, hi)
         if res.empty:
-            ch = chebyshev(W, y, b, lo, hi)
-            raise _inconsistent(W, y, b, scalar, lo, hi, max(ch.lower, 1.0))
+            try:
+                scale_lower = max(chebyshev(W, y, b, lo, hi, center=center).lower, 1.0)
+            except LPError:
+                scale_lower = 1.0  # the contractor's empty box is the proof; its size is unknown
+            raise _inconsistent(W, y, b, scalar, lo, hi, scale_lower, center)
         if check_consistency:
             check_consistency_by_lp()
         lower, upper = res.lower, res.upper

@@ -18,9 +18,16 @@ is given by the ``2p`` linear programs ``min / max theta_i over S``. This module
   The endpoints are therefore rigorous whatever the LP tolerances; the tolerances only decide tightness.
 
 The row bounds ``y -+ b`` are rounded outward (:func:`strip_bounds`), so the LP's set contains ``S``.
-HiGHS sees a model scaled by powers of two (columns of W to unit root-mean-square, rows to unit
-half-width; HiGHS would otherwise drop entries below 1e-9), but the safe bounds are evaluated on the
-original data with the duals mapped back (``y_k = r_k y'_k``), so the scaling cannot affect rigour.
+HiGHS sees a model shifted to a centre ``theta0`` (least squares) and scaled by powers of two: **rows first**,
+each by the power of two nearest ``1 / b_k`` (its own bound), **then columns**, each to unit root-mean-square
+of the row-scaled matrix. Changing the units of y (rows, with W and b) or of a parameter (a column) changes
+that model only by powers of two, so the box is the same in any units (to the LPs' tightness and the
+rounding of the converted data; ``tests/ident/test_units.py`` states the tolerance), and the shift keeps
+row bounds of the size of the strips however narrow they are (bounds of 1e-13 relative). HiGHS would
+otherwise drop entries below 1e-9 and reject blocks with entries of 1e15 (every HiGHS status is checked,
+:mod:`ident.lpsolver`). The safe bounds are evaluated on the original data with the duals mapped back
+(``y_k = d_i r_k y'_k``), around ``theta0`` (:func:`shifted_safe_bound`), so neither the scaling nor the
+shift can affect rigour. An LP HiGHS cannot solve keeps its endpoint at a coarser safe bound or the prior.
 
 :func:`chebyshev` solves ``min s  s.t. |y_k - W_k theta| <= s w_k, theta in Q`` the same way; with
 ``w = 1`` it is the smallest consistent scalar bound, with ``w = b`` it decides emptiness of ``S``
@@ -36,6 +43,7 @@ import highspy
 import numpy as np
 
 from ident.interval import down, mid_rad, mul, point_matmul, sub, sum_down, up
+from ident.lpsolver import LPError, add_dense_rows, check, new_highs
 
 __all__ = [
     "ChebyshevResult",
@@ -45,6 +53,7 @@ __all__ = [
     "power2_scale",
     "safe_lower_bound",
     "scaled_residual_upper",
+    "shifted_safe_bound",
     "strip_bounds",
 ]
 
@@ -101,13 +110,28 @@ def power2_scale(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _column_scale(W: np.ndarray) -> np.ndarray:
-    """Power-of-two column scales that bring each column of W to a root-mean-square of about 1."""
+def _column_scale(W: np.ndarray, row_scale: np.ndarray | None = None) -> np.ndarray:
+    """Power-of-two column scales bringing each column of ``diag(row_scale) W`` to a root-mean-square of about 1.
+
+    row_scale : (N,) the row factors HiGHS sees (default 1). Computed on the row-scaled matrix, so that the
+    scaled model does not depend on the units of y (rows) nor of the parameters (columns), up to the powers of
+    two. One blocked pass over W.
+    """
     ss = np.zeros(W.shape[1])
     for s in range(0, W.shape[0], _CHUNK):
         blk = W[s : s + _CHUNK]
+        if row_scale is not None:
+            blk = blk * row_scale[s : s + _CHUNK, None]
         ss += np.einsum("ij,ij->j", blk, blk)
     return power2_scale(np.sqrt(ss / max(W.shape[0], 1)))
+
+
+def _matvec(W: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``W @ x`` block by block (float)."""
+    out = np.empty(W.shape[0])
+    for s in range(0, W.shape[0], _CHUNK):
+        np.matmul(W[s : s + _CHUNK], x, out=out[s : s + _CHUNK])
+    return out
 
 
 def _spread_rows(n_rows: int, m: int) -> np.ndarray:
@@ -117,29 +141,38 @@ def _spread_rows(n_rows: int, m: int) -> np.ndarray:
 
 
 def _new_highs(tolerance: float) -> highspy.Highs:
-    h = highspy.Highs()
-    h.silent()
-    h.setOptionValue("output_flag", False)
-    h.setOptionValue("presolve", "off")
     # primal simplex: after an objective change the previous optimal basis stays primal feasible
     # (measured: about 15 % fewer iterations than HiGHS's default choice on the 2p hull LPs)
-    h.setOptionValue("simplex_strategy", 4)
-    h.setOptionValue("primal_feasibility_tolerance", tolerance)
-    h.setOptionValue("dual_feasibility_tolerance", tolerance)
-    return h
+    return new_highs(tolerance, presolve="off", simplex_strategy=4)
 
 
 def _add_dense_rows(h: highspy.Highs, A: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
-    m, n = A.shape
-    if m == 0:
-        return
-    starts = np.arange(m, dtype=np.int32) * n
-    index = np.tile(np.arange(n, dtype=np.int32), m)
-    h.addRows(m, np.asarray(lo, float), np.asarray(hi, float), m * n, starts, index, np.ascontiguousarray(A).ravel())
+    add_dense_rows(h, A, lo, hi)
 
 
 _OPTIMAL = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
+
+
+def shifted_safe_bound(A, bl, bu, xl, xu, c, y, x0) -> float:
+    """:func:`safe_lower_bound` evaluated around a float point ``x0`` (same guarantee, smaller rounding).
+
+    With ``x = x0 + z``: ``bl - A x0 <= A z <= bu - A x0`` (``A x0`` enclosed, bounds rounded outward),
+    ``z in [xl - x0, xu - x0]`` (rounded outward) and ``c^T x = c^T x0 + c^T z``. The terms of the bound are
+    then of the size of the strips rather than of ``|y| |bl|``, which keeps the bound tight when the strips
+    are narrow (bounds of 1e-13 relative). ``c`` must have entries in {-1, 0, 1} on the coordinates where
+    ``x0`` is non-zero (then ``c^T x0`` is exact up to one rounded sum, bounded below here).
+    """
+    A = np.asarray(A, dtype=float)
+    x0 = np.asarray(x0, dtype=float)
+    if A.shape[0]:
+        alo, ahi = point_matmul(A, x0)
+    else:
+        alo = ahi = np.zeros(0)
+    bl2 = np.where(np.isneginf(bl), -np.inf, down(np.asarray(bl, float) - ahi))
+    bu2 = np.where(np.isposinf(bu), np.inf, up(np.asarray(bu, float) - alo))
+    mu = safe_lower_bound(A, bl2, bu2, down(np.asarray(xl, float) - x0), up(np.asarray(xu, float) - x0), c, y)
+    return float(down(mu + sum_down(np.asarray(c, float) * x0)))
 
 
 @dataclass
@@ -153,41 +186,21 @@ class HullResult:
     points: np.ndarray | None = None  # (p, 2p) the LP solutions (float, unverified), columns min_i then max_i
 
 
-def _violations(W, x_cols, mid, inv_half):
-    """Scaled violation ``|W_k x - mid_k| * inv_half_k - 1`` for all rows k and each column x of ``x_cols``.
+def _violated_rows(W, dx_cols, m0, thr, skip):
+    """Rows k (not in ``skip``) with ``|W_k dx - m0_k| > thr_k`` for some column dx of ``dx_cols``.
 
-    ``mid = (bl + bu) / 2`` and ``inv_half = 1 / scale``: the value is ``> 0`` where a row is violated, in
-    units of the row scale (a float heuristic: rigour comes from the safe bounds, not from this test).
-    Returns the (N, k) array, computed block by block in place (no temporaries beyond one block).
+    Returns ``(rows, dev)`` with ``dev[r, j] = |W_rows[r] dx_j - m0|``; one blocked pass over ``W``
+    (computed transposed, ``dx^T W^T``, so that the reduction over the k solutions runs along contiguous rows).
     """
-    n, k = W.shape[0], x_cols.shape[1]
-    out = np.empty((n, k))
-    for s in range(0, n, _CHUNK):
-        e = min(n, s + _CHUNK)
-        a = out[s:e]
-        np.matmul(W[s:e], x_cols, out=a)
-        a -= mid[s:e, None]
-        np.abs(a, out=a)
-        a *= inv_half[s:e, None]
-        a -= 1.0
-    return out
-
-
-def _violated_rows(W, x_cols, mid, thr, skip):
-    """Rows k (not in ``skip``) with ``|W_k x - mid_k| > thr_k`` for some column x of ``x_cols``.
-
-    Returns ``(rows, dev)`` with ``dev[r, j] = |W_rows[r] x_j - mid|``; one blocked pass over ``W``
-    (computed transposed, ``x^T W^T``, so that the reduction over the k solutions runs along contiguous rows).
-    """
-    n, k = W.shape[0], x_cols.shape[1]
-    xt = np.ascontiguousarray(x_cols.T)
+    n, k = W.shape[0], dx_cols.shape[1]
+    xt = np.ascontiguousarray(dx_cols.T)
     rows, devs = [], []
     buf = np.empty(k * min(n, _CHUNK))
     for s in range(0, n, _CHUNK):
         e = min(n, s + _CHUNK)
         a = buf[: k * (e - s)].reshape(k, e - s)  # contiguous, so matmul writes through BLAS
         np.matmul(xt, W[s:e].T, out=a)
-        a -= mid[s:e]
+        a -= m0[s:e]
         np.abs(a, out=a)
         hit = np.flatnonzero((a.max(axis=0) > thr[s:e]) & ~skip[s:e])
         if hit.size:
@@ -206,6 +219,7 @@ def interval_hull(
     prior_hi: np.ndarray,
     *,
     scale: np.ndarray | None = None,
+    row_scale: np.ndarray | None = None,
     center: np.ndarray | None = None,
     initial_rows: int = 150,
     pool_rows: int = 4000,
@@ -217,8 +231,17 @@ def interval_hull(
     """Rigorous outer enclosure (tight to the LP tolerances) of the hull of ``{x in Q : bl <= W x <= bu}``.
 
     W : (N, p) float; bl, bu : (N,) row bounds (already outward rounded, see :func:`strip_bounds`);
-    prior_lo, prior_hi : (p,) finite prior box Q; scale : (N,) positive row scale for the violation test
-    (default ``(bu - bl) / 2``); center : (p,) a point near the middle of the set (e.g. least squares).
+    prior_lo, prior_hi : (p,) finite prior box Q; scale : (N,) positive unit of the violation test (a row is
+    violated when off its strip by more than ``violation_tol * scale``; default the half-width
+    ``(bu - bl) / 2``); row_scale : (N,) the rows' own size for the LP's equilibration (default ``scale``;
+    e.g. the bound b when the strip is one-sided); center : (p,) a point near the middle of the set (e.g.
+    least squares), the origin of the LP's coordinates.
+
+    Scaling (units-invariant): HiGHS sees ``z = (theta - center) / d`` and rows ``r_k W_k``, with ``r_k`` the
+    power of two nearest ``1 / row_scale_k`` and then ``d_j`` the power of two that brings column j of the
+    row-scaled matrix to unit root-mean-square. Multiplying y, W and the bounds of rows by a factor, or a
+    column of W by a factor (the parameter's unit), changes the scaled model only by powers of two; the shift
+    keeps the row bounds of the size of the strips, however narrow.
 
     Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary; the
     nearest ``initial_rows`` form the first working set and the nearest ``pool_rows`` a candidate pool.
@@ -231,25 +254,30 @@ def interval_hull(
     Inputs are assumed validated (finite, ``bl <= bu``, ``prior_lo <= prior_hi``). Returns a
     :class:`HullResult`; ``status == 'infeasible'`` when HiGHS found a working set infeasible (the caller
     proves emptiness with :func:`chebyshev`). Every endpoint is a safe dual bound (module docstring),
-    clipped to the prior; an LP that HiGHS cannot solve keeps its endpoint at the prior and is listed in
-    ``info['lp_failures']``.
+    evaluated around ``center`` and then once more over the box just found (which encloses the set, so the
+    bound stays valid and the dual's residual costs only that box's width), clipped to the prior. An LP that
+    HiGHS cannot solve (or a model it rejects) keeps its endpoint at the prior and is listed in
+    ``info['lp_failures']`` (``info['lp_error']`` holds the message of a rejected model).
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
     prior_lo = np.asarray(prior_lo, float)
     prior_hi = np.asarray(prior_hi, float)
-    if scale is None:
-        scale = 0.5 * bu - 0.5 * bl
-    inv_half = 1.0 / np.maximum(scale, np.finfo(float).tiny)
+    half = 0.5 * bu - 0.5 * bl
     mid = 0.5 * bl + 0.5 * bu
+    unit = half if scale is None else np.asarray(scale, float)
+    inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
+    r = power2_scale(unit if row_scale is None else np.asarray(row_scale, float))
 
-    # rank rows by distance of the centre to their strip boundary (slack / row norm)
-    if center is None:
-        center = 0.5 * (prior_lo + prior_hi)
+    theta0 = 0.5 * (prior_lo + prior_hi) if center is None else np.asarray(center, float)
+    theta0 = np.clip(np.where(np.isfinite(theta0), theta0, 0.5 * (prior_lo + prior_hi)), prior_lo, prior_hi)
+    m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
+
+    # rank rows by the distance of the centre to their strip boundary (slack / row norm)
     n_pool = min(n_rows, max(pool_rows, initial_rows))
     if n_pool < n_rows:
-        dist = _violations(W, np.asarray(center, float)[:, None], mid, inv_half)[:, 0]
-        dist /= np.sqrt(np.einsum("ij,ij->i", W, W)) * inv_half + 1e-300
+        dist = np.abs(m0) - half
+        dist /= np.sqrt(np.einsum("ij,ij->i", W, W)) + 1e-300
         pool = np.argpartition(-dist, n_pool - 1)[:n_pool]
         pool = pool[np.argsort(-dist[pool])]
         del dist
@@ -259,22 +287,10 @@ def interval_hull(
     first = pool[: min(initial_rows, pool.size)]
     first = np.union1d(first, _spread_rows(n_rows, 2 * p))
     ws_mask[first] = True
-    ws_idx = first
+    ws_idx = first[:0]
     pool = np.sort(pool)
 
-    # HiGHS works on x' = x / d (columns to unit rms) and rows scaled by r = 1 / half-width (powers of 2)
-    d = _column_scale(W)
-    r = power2_scale(scale)
-    h = _new_highs(lp_tol)
-    h.addVars(p, prior_lo / d, prior_hi / d)
-
-    def add_model_rows(rows):
-        rr = r[rows]
-        _add_dense_rows(h, W[rows] * d * rr[:, None], bl[rows] * rr, bu[rows] * rr)
-
-    add_model_rows(ws_idx)
-    cols = np.arange(p, dtype=np.int32)
-
+    d = _column_scale(W, r)
     n_lp = 2 * p
     costs = np.zeros((n_lp, p))
     order = []
@@ -283,17 +299,21 @@ def interval_hull(
         costs[p + i, i] = -1.0  # LP p + i: min -theta_i = -max theta_i
         order.append(i)
     order += [p + i for i in reversed(range(p))]
-    x_sol = np.zeros((p, n_lp))
+    x_sol = np.repeat(theta0[:, None], n_lp, axis=1)
+    dx_sol = np.zeros((p, n_lp))
     duals: list = [(ws_idx[:0], np.zeros(0))] * n_lp
     failures: list[int] = []
     counters = {"iterations": 0, "solves": 0}
     infeasible = False
+    lp_error = None
+    cols = np.arange(p, dtype=np.int32)
 
     def add(rows):
         nonlocal ws_idx
+        rr = r[rows]
+        add_dense_rows(h, W[rows] * d * rr[:, None], (m0[rows] - half[rows]) * rr, (m0[rows] + half[rows]) * rr)
         ws_mask[rows] = True
         ws_idx = np.concatenate([ws_idx, rows])
-        add_model_rows(rows)
 
     def worst(v, candidates):
         bad = v > violation_tol
@@ -308,7 +328,7 @@ def interval_hull(
     def solve(j) -> bool:
         """Solve LP j on the working set, refining against the pool; False if infeasible."""
         for _ in range(max_rounds):
-            h.changeColsCost(p, cols, costs[j])
+            check(h.changeColsCost(p, cols, costs[j]), "changeColsCost")
             h.run()
             counters["iterations"] += int(h.getInfo().simplex_iteration_count)
             counters["solves"] += 1
@@ -316,21 +336,23 @@ def interval_hull(
             if ms == _INFEASIBLE:
                 return False
             sol = h.getSolution()
-            if ms != _OPTIMAL or not sol.value_valid:
+            if ms != _OPTIMAL or not sol.value_valid or len(sol.col_value) != p:
                 failures.append(int(j))  # no usable duals: y = 0 keeps the endpoint at the prior
                 duals[j] = (ws_idx[:0], np.zeros(0))
-                x_sol[:, j] = np.clip(0.5 * (prior_lo + prior_hi), prior_lo, prior_hi)
                 return True
-            x = np.asarray(sol.col_value) * d
-            x_sol[:, j] = x
+            dx = np.asarray(sol.col_value) * d
+            dx_sol[:, j] = dx
+            x_sol[:, j] = theta0 + dx
             rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(ws_idx.size)
+            if rd.size != ws_idx.size:
+                raise LPError(f"HiGHS returned {rd.size} row duals for {ws_idx.size} rows")
             nz = rd != 0.0
             # duals of the original rows for the original cost +-e_i: y_k = d_i r_k y'_k (any y is valid)
             duals[j] = (ws_idx[nz], rd[nz] * r[ws_idx[nz]] * d[j % p])
             cand = pool[~ws_mask[pool]]
             if cand.size == 0:
                 return True
-            v = np.abs(W[cand] @ x - mid[cand]) * inv_half[cand] - 1.0
+            v = (np.abs(W[cand] @ dx - m0[cand]) - half[cand]) * inv_unit[cand]
             new = worst(v, cand)
             if new.size == 0:
                 return True
@@ -339,50 +361,65 @@ def interval_hull(
 
     rounds = 0
     todo = list(order)
-    while todo and rounds < max_rounds:
-        rounds += 1
-        for j in todo:
-            if not solve(j):
-                infeasible = True
+    try:
+        h = _new_highs(lp_tol)
+        check(h.addVars(p, (prior_lo - theta0) / d, (prior_hi - theta0) / d), "addVars")
+        add(first)
+        while todo and rounds < max_rounds:
+            rounds += 1
+            for j in todo:
+                if not solve(j):
+                    infeasible = True
+                    break
+            if infeasible:
                 break
-        if infeasible:
-            break
-        # full check of the solutions just computed against all N rows
-        check = np.array(todo)
-        todo = []
-        rows, dev = _violated_rows(W, x_sol[:, check], mid, (1.0 + violation_tol) / inv_half, ws_mask)
-        if rows.size:
-            new_rows = []
-            v = dev * inv_half[rows, None] - 1.0
-            for col, j in enumerate(check):
-                new = worst(v[:, col], rows)
-                if new.size:
-                    todo.append(int(j))
-                    new_rows.append(new)
-            if new_rows:
-                new_rows = np.unique(np.concatenate(new_rows))
-                add(new_rows)
-                pool = np.union1d(pool, new_rows)
+            # full check of the solutions just computed against all N rows
+            check_lps = np.array(todo)
+            todo = []
+            rows, dev = _violated_rows(W, dx_sol[:, check_lps], m0, half + violation_tol * unit, ws_mask)
+            if rows.size:
+                new_rows = []
+                v = (dev - half[rows, None]) * inv_unit[rows, None]
+                for col, j in enumerate(check_lps):
+                    new = worst(v[:, col], rows)
+                    if new.size:
+                        todo.append(int(j))
+                        new_rows.append(new)
+                if new_rows:
+                    new_rows = np.unique(np.concatenate(new_rows))
+                    add(new_rows)
+                    pool = np.union1d(pool, new_rows)
+    except LPError as exc:  # a model HiGHS rejects: the endpoints solved so far keep their (valid) duals
+        lp_error = str(exc)
+        infeasible = False
+        failures.extend(j for j in range(n_lp) if duals[j][0].size == 0 and j not in failures)
 
     lower = prior_lo.copy()
     upper = prior_hi.copy()
     if not infeasible:
-        for j in range(n_lp):
-            rows, yd = duals[j]
-            mu = safe_lower_bound(W[rows], bl[rows], bu[rows], prior_lo, prior_hi, costs[j], yd)
-            if j < p:
-                lower[j] = max(lower[j], mu)
-            else:
-                upper[j - p] = min(upper[j - p], -mu)
+        # the safe bounds over the prior, then once more over the box they give (it encloses the set)
+        for refine in (False, True):
+            if refine and np.any(lower > upper):
+                break  # the set is proven empty: no box to refine over
+            box_lo, box_hi = (lower.copy(), upper.copy()) if refine else (prior_lo, prior_hi)
+            for j in range(n_lp):
+                rows, yd = duals[j]
+                mu = shifted_safe_bound(W[rows], bl[rows], bu[rows], box_lo, box_hi, costs[j], yd, theta0)
+                if j < p:
+                    lower[j] = max(lower[j], mu)
+                else:
+                    upper[j - p] = min(upper[j - p], -mu)
     info = {
         "lp_iterations": counters["iterations"],
         "lp_solves": counters["solves"],
         "working_rows": int(ws_idx.size),
         "rounds": rounds,
-        "lp_failures": failures,
-        "converged": not todo,
+        "lp_failures": sorted(set(failures)),
+        "converged": not todo and lp_error is None,
         "seconds": time.perf_counter() - t0,
     }
+    if lp_error is not None:
+        info["lp_error"] = lp_error
     return HullResult(lower=lower, upper=upper, status="infeasible" if infeasible else "ok", info=info, points=x_sol)
 
 
@@ -426,48 +463,51 @@ def chebyshev(
     """Weighted Chebyshev (L-infinity) fit over the prior box, by one LP with constraint generation.
 
     W : (N, p); y : (N,); w : (N,) positive weights; prior box (p,) finite. Variables ``(theta, s)`` with
-    ``s in [0, s_max]``, ``s_max`` a rigorous upper bound of ``s*`` (the scaled residual at the prior's
-    midpoint, doubled), so the safe bound is valid. Rows per sample: ``W_k theta + w_k s >= y_k`` and
-    ``W_k theta - w_k s <= y_k`` (exact data, no rounding needed). The first working set is the rows of
-    largest scaled residual at ``center`` (e.g. least squares; default the prior's midpoint) plus spread rows.
+    ``s in [0, s_max]``, ``s_max`` a rigorous upper bound of ``s*`` (the scaled residual at ``center``,
+    doubled, plus 1), so the safe bound is valid. Rows per sample: ``W_k theta + w_k s >= y_k`` and
+    ``W_k theta - w_k s <= y_k``. HiGHS sees them shifted to ``center`` (default the prior's midpoint) and
+    scaled as in :func:`interval_hull` (rows by ``1 / w``, then columns, powers of two); the safe bound is
+    evaluated on the exact data around ``center``. The first working set is the rows of largest scaled
+    residual at ``center`` plus spread rows. Raises :class:`~ident.lpsolver.LPError` when HiGHS cannot solve
+    the LP or rejects the model (no bound is then known beyond the residual at ``center``).
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
     prior_lo = np.asarray(prior_lo, float)
     prior_hi = np.asarray(prior_hi, float)
     theta0 = np.clip(mid_rad(prior_lo, prior_hi)[0], prior_lo, prior_hi)
-    s_max = up(2.0 * scaled_residual_upper(W, y, w, theta0)) + 1.0
+    if center is not None:
+        c = np.asarray(center, float)
+        theta0 = np.clip(np.where(np.isfinite(c), c, theta0), prior_lo, prior_hi)
+    s_max = float(up(2.0 * scaled_residual_upper(W, y, w, theta0)) + 1.0)
+    e0 = y - _matvec(W, theta0)  # residuals at the centre (float: steers the LP only)
 
-    # HiGHS works on theta' = theta / d and rows scaled by r = 1 / w (powers of two), see interval_hull
-    d = np.append(_column_scale(W), 1.0)
+    # HiGHS works on ((theta - theta0) / d, s) and rows scaled by r ~ 1 / w (powers of two), see interval_hull
     r = power2_scale(w)
+    d = np.append(_column_scale(W, r), 1.0)
+    x0 = np.append(theta0, 0.0)
     h = _new_highs(lp_tol)
-    h.addVars(p + 1, np.append(prior_lo, 0.0) / d, np.append(prior_hi, s_max) / d)
+    xl, xu = np.append(prior_lo, 0.0), np.append(prior_hi, s_max)
+    check(h.addVars(p + 1, (xl - x0) / d, (xu - x0) / d), "addVars")
     cost = np.zeros(p + 1)
     cost[p] = 1.0
-    h.changeColsCost(p + 1, np.arange(p + 1, dtype=np.int32), cost)
+    check(h.changeColsCost(p + 1, np.arange(p + 1, dtype=np.int32), cost), "changeColsCost")
 
     def rows_for(idx):
         A_lo = np.hstack([W[idx], w[idx, None]])  # W theta + w s >= y
         A_hi = np.hstack([W[idx], -w[idx, None]])  # W theta - w s <= y
-        A = np.vstack([A_lo, A_hi])
-        lo = np.concatenate([y[idx], np.full(idx.size, -np.inf)])
-        hi = np.concatenate([np.full(idx.size, np.inf), y[idx]])
-        return A, lo, hi
+        return np.vstack([A_lo, A_hi])
 
     def add_model_rows(idx):
-        A, lo, hi = rows_for(idx)
         rr = np.concatenate([r[idx], r[idx]])
-        _add_dense_rows(h, A * d * rr[:, None], lo * rr, hi * rr)
+        lo = np.concatenate([e0[idx], np.full(idx.size, -np.inf)])
+        hi = np.concatenate([np.full(idx.size, np.inf), e0[idx]])
+        add_dense_rows(h, rows_for(idx) * d * rr[:, None], lo * rr, hi * rr)
 
     ws_mask = np.zeros(n_rows, dtype=bool)
     ws_mask[_spread_rows(n_rows, initial_rows // 4)] = True
     if n_rows > initial_rows:
-        c = theta0 if center is None else np.clip(np.asarray(center, float), prior_lo, prior_hi)
-        res = np.empty(n_rows)
-        for b in range(0, n_rows, _CHUNK):
-            e = min(n_rows, b + _CHUNK)
-            res[b:e] = np.abs(y[b:e] - W[b:e] @ c) / w[b:e]
+        res = np.abs(e0) / w
         res[ws_mask] = -np.inf
         k = initial_rows - int(ws_mask.sum())
         ws_mask[np.argpartition(-res, k - 1)[:k]] = True
@@ -485,14 +525,14 @@ def chebyshev(
         iterations += int(h.getInfo().simplex_iteration_count)
         sol = h.getSolution()
         if h.getModelStatus() != _OPTIMAL or not sol.value_valid:
-            raise RuntimeError(f"HiGHS failed on the Chebyshev LP: {h.modelStatusToString(h.getModelStatus())}")
-        x = np.asarray(sol.col_value) * d
-        theta, s = x[:p], x[p]
+            raise LPError(f"HiGHS failed on the Chebyshev LP: {h.modelStatusToString(h.getModelStatus())}")
+        z = np.asarray(sol.col_value) * d
+        dtheta, s = z[:p], z[p]
         # scaled residuals of all rows at theta, block by block
         worst = np.empty(n_rows)
         for b in range(0, n_rows, _CHUNK):
             e = min(n_rows, b + _CHUNK)
-            worst[b:e] = np.abs(y[b:e] - W[b:e] @ theta) / w[b:e]
+            worst[b:e] = np.abs(e0[b:e] - W[b:e] @ dtheta) / w[b:e]
         worst[ws_mask] = -np.inf
         bad = np.flatnonzero(worst > s + violation_tol * max(s, 1e-300))
         if bad.size == 0 or rounds >= max_rounds:
@@ -505,20 +545,16 @@ def chebyshev(
 
     ws_all = np.concatenate(order)
     rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(2 * ws_all.size)
+    if rd.size != 2 * ws_all.size:
+        raise LPError(f"HiGHS returned {rd.size} row duals for {2 * ws_all.size} rows")
     # HiGHS keeps the rows in insertion order: each block added the >= rows of the block, then its <= rows
-    A_all, lo_all, hi_all = [], [], []
-    for blk in order:
-        a, l, u = rows_for(blk)
-        A_all.append(a)
-        lo_all.append(l)
-        hi_all.append(u)
-    A = np.vstack(A_all)
-    lo = np.concatenate(lo_all)
-    hi = np.concatenate(hi_all)
+    A = np.vstack([rows_for(blk) for blk in order])
+    lo = np.concatenate([np.concatenate([y[blk], np.full(blk.size, -np.inf)]) for blk in order])
+    hi = np.concatenate([np.concatenate([np.full(blk.size, np.inf), y[blk]]) for blk in order])
     rd = rd * np.concatenate([np.concatenate([r[blk], r[blk]]) for blk in order])  # duals of the unscaled rows
     nz = rd != 0.0
-    lower = safe_lower_bound(A[nz], lo[nz], hi[nz], np.append(prior_lo, 0.0), np.append(prior_hi, s_max), cost, rd[nz])
-    theta = np.clip(theta, prior_lo, prior_hi)
+    lower = shifted_safe_bound(A[nz], lo[nz], hi[nz], xl, xu, cost, rd[nz], x0)
+    theta = np.clip(theta0 + dtheta, prior_lo, prior_hi)
     upper = scaled_residual_upper(W, y, w, theta)
     info = {
         "lp_iterations": iterations,

@@ -21,11 +21,20 @@ equals the batch hull of the same rows to the LP tolerance (same convergence tes
 (rather than one shared model with switched bases) keeps each re-solve a plain warm start of the model that
 was optimal for that objective; the working sets are a few hundred rows, so memory stays small.
 
-When a model becomes infeasible the stream may contradict the bound: a Chebyshev LP over all rows seen
-decides (:func:`ident.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError` is
-raised, now and on every later update (rows only shrink the set). If it is not proven (the set is thinner
-than the LP tolerance), the box of the batch :func:`ident.estimate` on all rows seen is returned (it encloses
-a slightly inflated set) and ``info['fallback'] = 'batch'``.
+When a model becomes infeasible, or the safe bounds of two endpoints cross (``lower_i > upper_i``, itself a
+proof that the rows seen are inconsistent), the verdict is the batch estimator's: a Chebyshev LP over all rows
+seen decides (:func:`ident.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
+is raised and **the rejected block is dropped**: the object is left exactly as before the update (rows seen,
+box, working sets; the HiGHS models that had taken rows of the block are rebuilt from their working sets), so
+later consistent blocks can still be added. If it is not proven (the set is thinner than the LP tolerance),
+the box of the batch :func:`ident.estimate` on all rows seen is returned (it encloses a slightly inflated set)
+and ``info['fallback'] = 'batch'``.
+
+Scaling (as :func:`ident.hull.interval_hull`): each model sees ``(theta - c_j) / d`` with ``c_j`` the
+midpoint of the box when the model is made (the shift keeps the row bounds of the size of the strips,
+however narrow), rows scaled by the power of two nearest the inverse of their half-width, and the column
+scale ``d`` of the first block after that row scaling. A model HiGHS cannot solve is rebuilt once around the
+current box's midpoint; if that fails too, its endpoint keeps its previous (valid) bound.
 """
 
 from __future__ import annotations
@@ -35,8 +44,9 @@ import time
 import highspy
 import numpy as np
 
-from ident.estimate import InconsistentDataError, _check_finite, _check_prior, _inconsistent, _real_array, estimate
-from ident.hull import _add_dense_rows, _new_highs, power2_scale, safe_lower_bound, strip_bounds, chebyshev
+from ident.estimate import InconsistentDataError, _check_finite, _check_prior, _real_array, estimate
+from ident.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
+from ident.lpsolver import LPError, add_dense_rows, check
 from ident.parameters import Box
 
 __all__ = ["OnlineHull"]
@@ -86,6 +96,7 @@ class OnlineHull:
         self._n = 0
         self._d: np.ndarray | None = None  # column scale, fixed at the first rows
         self._models: list[highspy.Highs | None] = [None] * (2 * p)
+        self._x0 = np.zeros((p, 2 * p))  # each model's origin (its shift), set when the model is made
         self._ws: list[list[int]] = [[] for _ in range(2 * p)]  # working-set rows, in model order
         self._in_ws = [np.zeros(cap, dtype=bool) for _ in range(2 * p)]
         # current optimal points (columns): min theta_i at the prior's lower corner in i, centre elsewhere
@@ -97,7 +108,6 @@ class OnlineHull:
         self._lower = self._lo.copy()
         self._upper = self._hi.copy()
         self._duals: list[np.ndarray | None] = [None] * (2 * p)
-        self._error: InconsistentDataError | None = None
         self.stats = {"updates": 0, "resolved_endpoints": 0, "lp_solves": 0, "lp_iterations": 0}
 
     # ------------------------------------------------------------------------------------------ state
@@ -128,20 +138,31 @@ class OnlineHull:
         return c
 
     def _model(self, j: int) -> highspy.Highs:
+        """Model j, made (around the current box's midpoint, with its working-set rows) when missing."""
         if self._models[j] is None:
+            x0 = np.clip(0.5 * self._lower + 0.5 * self._upper, self._lo, self._hi)
             h = _new_highs(self.lp_tol)
-            h.setOptionValue("simplex_strategy", 1)  # dual simplex: new rows keep the basis dual feasible
-            h.addVars(self.p, self._lo / self._d, self._hi / self._d)
-            h.changeColsCost(self.p, np.arange(self.p, dtype=np.int32), self._cost(j) * self._d)
+            check(h.setOptionValue("simplex_strategy", 1), "simplex_strategy")  # dual simplex: new rows keep the basis dual feasible
+            check(h.addVars(self.p, (self._lo - x0) / self._d, (self._hi - x0) / self._d), "addVars")
+            check(h.changeColsCost(self.p, np.arange(self.p, dtype=np.int32), self._cost(j) * self._d), "changeColsCost")
+            self._x0[:, j] = x0
             self._models[j] = h
+            if self._ws[j]:
+                self._add_model_rows(j, np.asarray(self._ws[j], dtype=np.int64))
         return self._models[j]
+
+    def _add_model_rows(self, j: int, rows: np.ndarray) -> None:
+        r = power2_scale(0.5 * self._bu[rows] - 0.5 * self._bl[rows])
+        a0 = self._W[rows] @ self._x0[:, j]
+        add_dense_rows(self._models[j], self._W[rows] * self._d * r[:, None], (self._bl[rows] - a0) * r,
+                       (self._bu[rows] - a0) * r)
 
     def _add(self, j: int, rows: np.ndarray) -> None:
         rows = rows[~self._in_ws[j][rows]]
         if rows.size == 0:
             return
-        r = power2_scale(0.5 * self._bu[rows] - 0.5 * self._bl[rows])
-        _add_dense_rows(self._model(j), self._W[rows] * self._d * r[:, None], self._bl[rows] * r, self._bu[rows] * r)
+        self._model(j)
+        self._add_model_rows(j, rows)
         self._in_ws[j][rows] = True
         self._ws[j].extend(rows.tolist())
 
@@ -171,19 +192,44 @@ class OnlineHull:
         _check_finite(y, "y_rows")
         if not np.all(np.isfinite(b) & (b > 0)):
             raise ValueError("bound_rows must be finite and > 0 in every row")
-        if self._error is not None:
-            raise self._error
         if k == 0:
             return self.box
+        snapshot = self._snapshot()
+        try:
+            return self._update(W, y, b, t0)
+        except InconsistentDataError:
+            self._restore(snapshot)  # the rejected block leaves no trace
+            raise
+
+    def _snapshot(self) -> dict:
+        return {"n": self._n, "lower": self._lower.copy(), "upper": self._upper.copy(), "x": self._x.copy(),
+                "duals": list(self._duals), "ws": [len(w) for w in self._ws], "d": self._d,
+                "stats": dict(self.stats)}
+
+    def _restore(self, snap: dict) -> None:
+        n = snap["n"]
+        self._n, self._d = n, snap["d"]
+        self._lower, self._upper, self._x = snap["lower"], snap["upper"], snap["x"]
+        self._duals = snap["duals"]
+        self.stats = snap["stats"]
+        for j, length in enumerate(snap["ws"]):
+            if len(self._ws[j]) != length:
+                self._in_ws[j][self._ws[j][length:]] = False
+                del self._ws[j][length:]
+                self._models[j] = None  # rebuilt from its working set when next needed
+                self._duals[j] = None
+        for m in self._in_ws:
+            m[n:] = False
+
+    def _update(self, W, y, b, t0) -> Box:
+        k = W.shape[0]
         self._grow(k)
         s, e = self._n, self._n + k
         self._W[s:e], self._y[s:e], self._b[s:e] = W, y, b
         self._bl[s:e], self._bu[s:e] = strip_bounds(y, b)
         self._n = e
         if self._d is None:
-            from ident.hull import _column_scale
-
-            self._d = _column_scale(W)
+            self._d = _column_scale(W, power2_scale(b))  # columns of the row-scaled block (units-invariant)
         # 1. which endpoints does a new row cut off?
         new = np.arange(s, e)
         viol = self._violation(new, self._x)
@@ -201,8 +247,7 @@ class OnlineHull:
             for j, rows in todo.items():
                 if not first and rows.size > self.add_rows:  # new rows go in at once; older ones the worst first
                     rows = rows[np.argsort(-self._violation(rows, self._x[:, [j]])[:, 0])[: self.add_rows]]
-                self._add(j, rows)
-                status = self._solve(j)
+                status = self._add_and_solve(j, rows)
                 if status == "infeasible":
                     fallback = self._infeasible()
                     break
@@ -221,14 +266,16 @@ class OnlineHull:
                 bad = np.flatnonzero((v[:, c] > self.violation_tol) & ~self._in_ws[j][: self._n])
                 if bad.size:
                     todo[int(j)] = bad
+        if fallback is None:
+            box_lo, box_hi = self._lower.copy(), self._upper.copy()  # encloses the set before this block
+            for j in resolved:
+                self._bound(j, box_lo, box_hi)
+            if np.any(self._lower > self._upper):  # crossing safe bounds: the rows seen are inconsistent
+                fallback = self._infeasible()
         if fallback is not None:
             lower, upper = fallback
-        else:
-            for j in resolved:
-                self._bound(j)
-            lower, upper = self._lower, self._upper
-        self._lower = np.maximum(self._lower, lower)
-        self._upper = np.minimum(self._upper, upper)
+            self._lower = np.maximum(self._lower, lower)
+            self._upper = np.minimum(self._upper, upper)
         box = self.box
         box.info.update({"resolved": resolved, "seconds": time.perf_counter() - t0, "lp_failures": sorted(failed)})
         if fallback is not None:
@@ -236,10 +283,35 @@ class OnlineHull:
         return box
 
     def _violation(self, rows: np.ndarray, x_cols: np.ndarray) -> np.ndarray:
-        """``|W_k x - mid_k| / half_k - 1`` (> 0: violated) for rows k and each column x (float heuristic)."""
+        """``|W_k x - mid_k| / half_k - 1`` (> 0: violated) for rows k and each column x (float heuristic).
+
+        Where the value is positive it is reduced by a bound of its own rounding error (``|W_k| |x| + |mid|``
+        times 2^-50, relative to the half-width), so that narrow strips are not reported violated by rounding."""
         mid = 0.5 * self._bl[rows] + 0.5 * self._bu[rows]
         half = 0.5 * self._bu[rows] - 0.5 * self._bl[rows]
-        return np.abs(self._W[rows] @ x_cols - mid[:, None]) / half[:, None] - 1.0
+        Wr = self._W[rows]
+        v = np.abs(Wr @ x_cols - mid[:, None]) / half[:, None] - 1.0
+        hit = np.flatnonzero((v > self.violation_tol).any(axis=1))
+        if hit.size:
+            err = (np.abs(Wr[hit]) @ np.abs(x_cols) + np.abs(mid[hit, None])) * 2.0**-50 / half[hit, None]
+            v[hit] -= err
+        return v
+
+    def _add_and_solve(self, j: int, rows: np.ndarray) -> str:
+        """Add rows to model j and re-solve; a model HiGHS rejects or cannot solve is rebuilt once around the
+        current box's midpoint. Returns 'ok', 'infeasible' or 'failed'."""
+        for attempt in range(2):
+            try:
+                self._add(j, rows)
+                status = self._solve(j)
+            except LPError:
+                status = "failed"
+            if status != "failed" or attempt:
+                return status
+            self._models[j] = None  # rebuilt (with all its working-set rows) by the next _add/_model
+            self._duals[j] = None
+            rows = rows[:0]
+        return status
 
     def _solve(self, j: int) -> str:
         h = self._model(j)
@@ -254,21 +326,26 @@ class OnlineHull:
         sol = h.getSolution()
         if status != _OPTIMAL or not sol.value_valid:
             return "failed"  # the previous (valid) bound of this endpoint stays
-        self._x[:, j] = np.clip(np.asarray(sol.col_value) * self._d, self._lo, self._hi)
-        self._duals[j] = np.asarray(sol.row_dual).copy() if sol.dual_valid else None
+        rd = np.asarray(sol.row_dual).copy() if sol.dual_valid else None
+        if rd is not None and rd.size != len(self._ws[j]):
+            return "failed"
+        self._x[:, j] = np.clip(self._x0[:, j] + np.asarray(sol.col_value) * self._d, self._lo, self._hi)
+        self._duals[j] = rd
         return "ok"
 
-    def _bound(self, j: int) -> None:
-        """Tighten endpoint j by the safe bound of its model's last duals (any duals give a valid bound)."""
+    def _bound(self, j: int, box_lo: np.ndarray, box_hi: np.ndarray) -> None:
+        """Tighten endpoint j by the safe bound of its model's last duals (any duals give a valid bound), over
+        the box ``[box_lo, box_hi]`` that encloses the set before this block (hence after it)."""
         rd = self._duals[j]
-        if rd is None:
+        if rd is None or np.any(box_lo > box_hi):
             return
         ws = np.asarray(self._ws[j], dtype=np.int64)
         r = power2_scale(0.5 * self._bu[ws] - 0.5 * self._bl[ws])
         yd = rd * r  # duals of the unscaled rows (the cost was scaled as c' = D c)
         nz = yd != 0.0
         rows = ws[nz]
-        mu = safe_lower_bound(self._W[rows], self._bl[rows], self._bu[rows], self._lo, self._hi, self._cost(j), yd[nz])
+        mu = shifted_safe_bound(self._W[rows], self._bl[rows], self._bu[rows], box_lo, box_hi, self._cost(j), yd[nz],
+                                self._x0[:, j])
         i = j % self.p
         if j < self.p:
             self._lower[i] = max(self._lower[i], mu)
@@ -276,16 +353,9 @@ class OnlineHull:
             self._upper[i] = min(self._upper[i], -mu)
 
     def _infeasible(self):
-        """A working set is infeasible: prove the emptiness of all rows seen, or fall back to the batch hull."""
+        """The rows seen look inconsistent: the batch estimator's verdict on all of them (raises
+        :class:`~ident.InconsistentDataError` when proven; else the batch box of a slightly inflated set)."""
         n = self._n
         W, y, b = self._W[:n], self._y[:n], self._b[:n]
-        ch = chebyshev(W, y, b, self._lo, self._hi)
-        if ch.lower > 1.0:
-            self._error = _inconsistent(W, y, b, bool(np.all(b == b[0])), self._lo, self._hi, ch.lower)
-            raise self._error
-        try:
-            box = estimate(W, y, b, (self._lo, self._hi))
-        except InconsistentDataError as exc:
-            self._error = exc
-            raise
+        box = estimate(W, y, b, (self._lo, self._hi))
         return np.array(box.lower), np.array(box.upper)

@@ -71,7 +71,8 @@ from ident.estimate import (
     estimate,
     min_consistent_bound,
 )
-from ident.hull import _column_scale, _new_highs, power2_scale, safe_lower_bound, strip_bounds
+from ident.hull import _column_scale, power2_scale, safe_lower_bound, strip_bounds
+from ident.lpsolver import check, new_highs
 from ident.interval import point_matvec, up
 from ident.parameters import Box
 
@@ -119,8 +120,8 @@ def _check_q(q, m: int) -> int:
 
 
 def _check_groups(groups, q: int, m: int) -> tuple[int, ...]:
-    if groups is None:
-        groups = (q + 1, 2 * q + 1)
+    if groups is None:  # the default (q + 1, 2 q + 1), without partitions larger than the rows (m > q always)
+        return tuple(sorted({g for g in (q + 1, 2 * q + 1) if g <= m}))
     if isinstance(groups, (int, np.integer)) and not isinstance(groups, bool):
         groups = (int(groups),)
     try:
@@ -275,8 +276,9 @@ class _BigM:
         self.s_max = float(up(up(np.max(need, initial=0.0)) * 2.0 + 1.0))
         self.xl = np.concatenate([lo, np.zeros(n), [0.0]])
         self.xu = np.concatenate([hi, np.ones(n), [self.s_max]])
-        self.d = np.concatenate([_column_scale(W), np.ones(n + 1)])
-        self.r = np.concatenate([power2_scale(self.w)] * 2 + [np.ones(1)])
+        r = power2_scale(self.w)  # rows to units of their half-width first, then columns (units-invariant)
+        self.d = np.concatenate([_column_scale(W, r), np.ones(n + 1)])
+        self.r = np.concatenate([r] * 2 + [np.ones(1)])
         self.lp_tol = lp_tol
 
     def rows(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -305,17 +307,12 @@ class _BigM:
     def highs(self, integer: bool) -> highspy.Highs:
         n, p = self.n, self.p
         if integer:
-            h = highspy.Highs()
-            h.silent()
-            h.setOptionValue("output_flag", False)
-            h.setOptionValue("mip_rel_gap", 1e-9)
-            h.setOptionValue("mip_abs_gap", 0.0)
-            h.setOptionValue("primal_feasibility_tolerance", self.lp_tol)
-            h.setOptionValue("mip_feasibility_tolerance", self.lp_tol)
+            h = new_highs(None, mip_rel_gap=1e-9, mip_abs_gap=0.0, primal_feasibility_tolerance=self.lp_tol,
+                          mip_feasibility_tolerance=self.lp_tol)
         else:
-            h = _new_highs(self.lp_tol)
-            h.setOptionValue("simplex_strategy", 1)  # dual simplex: node changes are bound changes
-        h.addVars(p + n + 1, self.xl / self.d, self.xu / self.d)
+            # dual simplex: node changes are bound changes
+            h = new_highs(self.lp_tol, presolve="off", simplex_strategy=1)
+        check(h.addVars(p + n + 1, self.xl / self.d, self.xu / self.d), "addVars")
         # sparse rows: each upper/lower row has the p theta entries, its z and s
         d, r = self.d, self.r
         starts, index, value, lo_b, hi_b = [], [], [], [], []
@@ -337,12 +334,12 @@ class _BigM:
         value.extend([1.0] * n)
         lo_b.append(-np.inf)
         hi_b.append(float(self.budget))
-        h.addRows(2 * n + 1, np.array(lo_b), np.array(hi_b), len(value), np.array(starts, dtype=np.int32),
-                  np.array(index, dtype=np.int32), np.array(value))
+        check(h.addRows(2 * n + 1, np.array(lo_b), np.array(hi_b), len(value), np.array(starts, dtype=np.int32),
+                        np.array(index, dtype=np.int32), np.array(value)), f"addRows ({2 * n + 1} rows)")
         if integer:
-            h.changeColsIntegrality(n, np.arange(p, p + n, dtype=np.int32),
-                                    np.full(n, highspy.HighsVarType.kInteger))
-            h.changeColBounds(p + n, 0.0, 0.0)  # no elastic slack in the MILP
+            check(h.changeColsIntegrality(n, np.arange(p, p + n, dtype=np.int32),
+                                          np.full(n, highspy.HighsVarType.kInteger)), "changeColsIntegrality")
+            check(h.changeColBounds(p + n, 0.0, 0.0), "changeColBounds")  # no elastic slack in the MILP
         return h
 
     def safe_bound(self, cost: np.ndarray, row_dual_scaled: np.ndarray, xl, xu) -> float:

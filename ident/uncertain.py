@@ -64,13 +64,21 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import highspy
 import numpy as np
 import scipy.signal
 
-from ident.estimate import InconsistentDataError, _check_bound, _check_prior, _real_array, _check_finite
+from ident.estimate import (
+    InconsistentDataError,
+    _check_bound,
+    _check_finite,
+    _check_prior,
+    _least_squares_center,
+    _real_array,
+)
 from ident.filtering import (
     ProcessingSettings,
     central_difference,
@@ -80,16 +88,9 @@ from ident.filtering import (
     parallel_filter,
     second_difference,
 )
-from ident.hull import (
-    _add_dense_rows,
-    _column_scale,
-    _new_highs,
-    interval_hull,
-    power2_scale,
-    safe_lower_bound,
-    strip_bounds,
-)
+from ident.hull import _column_scale, _new_highs, interval_hull, power2_scale, shifted_safe_bound, strip_bounds
 from ident.interval import down, nonneg_upper, point_matmul, point_matvec, up
+from ident.lpsolver import LPError, LPFallbackWarning, add_dense_rows, check
 from ident.parameters import Box
 
 __all__ = [
@@ -149,37 +150,49 @@ def _radius(r, name: str, n: int) -> np.ndarray:
 
 
 # -------------------------------------------------------------------------------------------- the hull
-def _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol=1e-9):
+def _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol=1e-9, center=None):
     """``min s`` s.t. ``W_lo theta - s b <= y``, ``W_hi theta + s b >= y``, theta in [lo, hi], s in [0, s_max].
 
-    Returns (s_lower (safe dual bound), s_upper (verified at the returned theta), theta). ``S`` is empty iff
-    ``s* > 1``. All rows at once (HiGHS); the bound is rigorous for the exact float data.
+    Returns (s_lower (safe dual bound), s_upper (verified at the returned theta), theta, solved). ``S`` is empty iff
+    ``s* > 1``. All rows at once (HiGHS, shifted to ``center`` and scaled rows first by ``1 / b``, then
+    columns, powers of two); the bound is rigorous for the exact float data. If HiGHS cannot solve the LP,
+    ``s_lower = 0`` (nothing proven), ``s_upper`` is the verified value at ``center`` and ``solved`` is False.
     """
     m, p = W_lo.shape
-    theta0 = 0.5 * lo + 0.5 * hi
-    s_max = float(up(2.0 * _op_upper(W_lo, W_hi, y, b, theta0)) + 1.0)
+    theta0 = 0.5 * lo + 0.5 * hi if center is None else np.clip(center, lo, hi)
+    s0 = _op_upper(W_lo, W_hi, y, b, theta0)
+    s_max = float(up(2.0 * s0) + 1.0)
     A = np.vstack([np.hstack([W_lo, -b[:, None]]), np.hstack([W_hi, b[:, None]])])
     bl = np.concatenate([np.full(m, -np.inf), y])
     bu = np.concatenate([y, np.full(m, np.inf)])
-    d = np.append(_column_scale(np.vstack([W_lo, W_hi])), 1.0)
+    x0 = np.append(theta0, 0.0)
+    a0 = A[:, :p] @ theta0
     r = np.tile(power2_scale(b), 2)
-    h = _new_highs(lp_tol)
+    d = np.append(_column_scale(A[:, :p], r), 1.0)
     xl, xu = np.append(lo, 0.0), np.append(hi, s_max)
-    h.addVars(p + 1, xl / d, xu / d)
-    _add_dense_rows(h, A * d * r[:, None], bl * r, bu * r)
     cost = np.zeros(p + 1)
     cost[p] = 1.0
-    h.changeColsCost(p + 1, np.arange(p + 1, dtype=np.int32), cost * d)
-    h.run()
-    sol = h.getSolution()
-    if h.getModelStatus() != highspy.HighsModelStatus.kOptimal or not sol.value_valid:
-        raise RuntimeError(f"HiGHS failed on the Oettli-Prager scale LP: {h.modelStatusToString(h.getModelStatus())}")
-    x = np.asarray(sol.col_value) * d
-    yd = np.asarray(sol.row_dual) * r if sol.dual_valid else np.zeros(2 * m)
+    try:
+        h = _new_highs(lp_tol)
+        check(h.addVars(p + 1, (xl - x0) / d, (xu - x0) / d), "addVars")
+        add_dense_rows(h, A * d * r[:, None], (bl - a0) * r, (bu - a0) * r)
+        check(h.changeColsCost(p + 1, np.arange(p + 1, dtype=np.int32), cost * d), "changeColsCost")
+        h.run()
+        sol = h.getSolution()
+        if h.getModelStatus() != highspy.HighsModelStatus.kOptimal or not sol.value_valid:
+            raise LPError(f"HiGHS failed on the Oettli-Prager scale LP: {h.modelStatusToString(h.getModelStatus())}")
+        rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(2 * m)
+        if rd.size != 2 * m:
+            raise LPError(f"HiGHS returned {rd.size} row duals for {2 * m} rows")
+    except LPError as exc:
+        warnings.warn(f"uncertain_hull: {exc}; consistency not decided by the LP", LPFallbackWarning, stacklevel=3)
+        return 0.0, s0, theta0, False
+    x = x0 + np.asarray(sol.col_value) * d
+    yd = rd * r
     nz = yd != 0.0
-    s_lo = safe_lower_bound(A[nz], bl[nz], bu[nz], xl, xu, cost, yd[nz])
+    s_lo = shifted_safe_bound(A[nz], bl[nz], bu[nz], xl, xu, cost, yd[nz], x0)
     theta = np.clip(x[:p], lo, hi)
-    return max(s_lo, 0.0), _op_upper(W_lo, W_hi, y, b, theta), theta
+    return max(s_lo, 0.0), _op_upper(W_lo, W_hi, y, b, theta), theta, True
 
 
 def _op_upper(W_lo, W_hi, y, b, theta) -> float:
@@ -231,32 +244,43 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
         return A, BL, BU
 
     info: dict = {"method": "interval", "rows": m}
+    center = _least_squares_center(Wc.T @ Wc, Wc, y, lo, hi, None if scalar else b)
     A, BL, BU = stacked(b)
     if np.any(BL > BU):  # a row whose range over the prior misses its strip: S is empty (rigorous)
-        s_lo, s_up, _ = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol)
+        s_lo, s_up, _, _ = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol, center)
         raise inconsistent(max(s_lo, 1.0), s_up)
-    # scale=None: each stacked row's own half-width (BU - BL) / 2, so that "violated" means outside [BL, BU]
-    res = interval_hull(A, BL, BU, lo, hi, lp_tol=lp_tol)
-    if res.status == "infeasible" or np.any(res.lower > res.upper):
-        s_lo, s_up, theta = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol)
-        if s_lo > 1.0:
-            raise inconsistent(s_lo, s_up)
+    # scale=b: a stacked row is violated when theta is off its range [BL, BU] by more than violation_tol * b
+    # (its own bound, not the width of the range), and HiGHS sees each row in units of its bound
+    rows_b = np.concatenate([b, b])
+    res = interval_hull(A, BL, BU, lo, hi, scale=rows_b, center=center, lp_tol=lp_tol)
+    crossed = res.status == "ok" and bool(np.any(res.lower > res.upper))  # rigorous: S is empty
+    if res.status == "infeasible" or crossed:
+        s_lo, s_up, theta, solved = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol, center)
+        if s_lo > 1.0 or (crossed and not solved):  # crossing safe bounds prove S empty too
+            raise inconsistent(max(s_lo, 1.0), s_up)
         factor = max(s_up, 1.0) * (1.0 + 1e-9)  # not proven empty: enclose the slightly larger set
         info["bound_inflated_by"] = factor
         A, BL, BU = stacked(b * factor)
-        res = interval_hull(A, BL, BU, lo, hi, center=theta, lp_tol=lp_tol)
-        if res.status != "ok":
-            raise RuntimeError("interval-regressor hull LPs infeasible on a set proven non-empty: HiGHS failure")
+        res = interval_hull(A, BL, BU, lo, hi, scale=rows_b * factor, center=theta, lp_tol=lp_tol)
+        if res.status != "ok" or np.any(res.lower > res.upper):
+            warnings.warn("uncertain_hull: the hull LPs failed on a set known to be non-empty; the box is the prior",
+                          LPFallbackWarning, stacklevel=2)
+            res.lower, res.upper = lo.copy(), hi.copy()
         info["nonempty_proven"] = True
     else:
         x_mean = np.clip(res.points.mean(axis=1), lo, hi)
         if _op_upper(W_lo, W_hi, y, b, x_mean) <= 1.0:
             info["nonempty_proven"] = True
         else:
-            s_lo, s_up, _ = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol)
+            s_lo, s_up, _, _ = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol, center)
             if s_lo > 1.0:
                 raise inconsistent(s_lo, s_up)
             info["nonempty_proven"] = s_up <= 1.0
+    if res.info["lp_failures"]:
+        warnings.warn(f"uncertain_hull: HiGHS could not solve {len(res.info['lp_failures'])} of the hull LPs "
+                      f"({res.info.get('lp_error', 'no optimal basis')}); their endpoints are coarser safe bounds "
+                      "or the prior's", LPFallbackWarning, stacklevel=2)
+    info["lp_failures"] = res.info["lp_failures"]
     info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "converged")})
     lower, upper = np.clip(res.lower, lo, hi), np.clip(res.upper, lo, hi)
     info["seconds"] = time.perf_counter() - t0

@@ -88,17 +88,26 @@ def test_untouched_endpoints_are_not_resolved():
     assert box.info["resolved"] == [] and hull.stats["lp_solves"] == before
 
 
-def test_a_stream_that_contradicts_the_bound_raises_and_stays_inconsistent():
+def test_a_block_that_contradicts_the_bound_is_rejected_and_leaves_no_trace():
     W, y, _ = h4_like(2, 200, p=4)
-    hull = OnlineHull((np.zeros(4), 2 * np.ones(4)))
+    prior = (np.zeros(4), 2 * np.ones(4))
+    hull = OnlineHull(prior)
     hull.update(W[:400], y[:400], 1.0)
+    before = hull.box
     bad_y = y[400:440].copy()
     bad_y[5] += 100.0
     with pytest.raises(ident.InconsistentDataError) as err:
         hull.update(W[400:440], bad_y, 1.0)
     assert err.value.min_bound > 1.0
-    with pytest.raises(ident.InconsistentDataError):
-        hull.update(W[440:480], y[440:480], 1.0)
+    assert hull.rows_seen == 400
+    np.testing.assert_array_equal(hull.box.lower, before.lower)
+    np.testing.assert_array_equal(hull.box.upper, before.upper)
+    # the object goes on: the next blocks are added as if the rejected one had never come
+    box = hull.update(W[440:800], y[440:800], 1.0)
+    keep = np.r_[0:400, 440:800]
+    batch = ident.estimate(W[keep], y[keep], 1.0, prior)
+    np.testing.assert_allclose(box.lower, batch.lower, atol=TOL)
+    np.testing.assert_allclose(box.upper, batch.upper, atol=TOL)
 
 
 def test_bad_inputs_are_named():
