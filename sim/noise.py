@@ -606,7 +606,9 @@ class TorqueError:
                          else Ripple.split(r["amplitude"], list(r["orders"])))
         if "gain" in spec:
             g = _table(spec["gain"], "gain", ("max", "mode"), "max")
-            comps.append(GainError(g.get("max", 0.0), g.get("mode", "worst"), limit))
+            if "max" not in g:
+                raise NoiseModelError(f"spec['gain'] needs max (the bound on |g_i|), got keys {sorted(g)}")
+            comps.append(GainError(g["max"], g.get("mode", "worst"), limit))
         if "quantisation_lsb" in spec:
             comps.append(LogQuantisation(spec["quantisation_lsb"], limit))
         return cls(comps)

@@ -253,6 +253,8 @@ def test_bad_inputs_raise_clear_errors():
         N.TorqueError.from_spec({"sine": {"amplitude": 1.0, "freq": 2.0}})
     with pytest.raises(TypeError, match=r"spec\['gain'\] must be a number"):
         N.TorqueError.from_spec({"gain": "2%"})
+    with pytest.raises(E, match=r"spec\['gain'\] needs max"):
+        N.TorqueError.from_spec({"gain": {"mode": "random"}})
     with pytest.raises(E, match="exactly one of amplitudes"):
         N.TorqueError.from_spec({"ripple": {"orders": [1], "amplitudes": [0.1], "amplitude": 0.1}})
     with pytest.raises(E, match=r"one value per order \(2\), got 1"):
