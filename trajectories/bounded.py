@@ -63,13 +63,15 @@ class HalfWidths:
 
     h : (p,) ``max delta_j`` s.t. ``|W delta| <= 1`` [parameter units per N m of bound];
     delta : (p, p) the maximisers, row j for LP j; duals : (p, m) HiGHS row duals of LP j (``W^T y_j = -e_j``);
-    iterations : simplex iterations over the p solves.
+    iterations : simplex iterations over the p solves; bases : the p optimal HiGHS bases (to warm-start the
+    next call on a regressor with the same rows, e.g. the optimiser's next iterate).
     """
 
     h: np.ndarray
     delta: np.ndarray
     duals: np.ndarray
     iterations: int
+    bases: tuple = ()
 
     def gradient(self, weights=None) -> np.ndarray:
         """``sum_j weights_j dh_j/dW`` (m, p) by the envelope theorem (``dh_j/dW = y_j delta_j^T``);
@@ -82,8 +84,11 @@ class HalfWidths:
         return np.outer(self.duals[j], self.delta[j])
 
 
-def halfwidths(W) -> HalfWidths:
+def halfwidths(W, bases=None) -> HalfWidths:
     """The p half-width LPs of W (m, p) (module docstring), one warm-started HiGHS model.
+
+    bases : optional p HiGHS bases of a previous call on a W with the same shape: LP j starts from bases[j]
+    (else from the previous LP's optimal basis).
 
     Raises ValueError for a W that is not a finite 2-D array with at least one row.
     """
@@ -105,11 +110,14 @@ def halfwidths(W) -> HalfWidths:
     lp.a_matrix_.value_ = np.ascontiguousarray(W.T).ravel()
     h.passModel(lp)
     cols = np.arange(p, dtype=np.int32)
-    out_h, delta, duals, iters = np.empty(p), np.zeros((p, p)), np.zeros((p, m)), 0
+    out_h, delta, duals, iters, out_bases = np.empty(p), np.zeros((p, p)), np.zeros((p, m)), 0, []
+    use_bases = bases is not None and len(bases) == p
     for j in range(p):
         cost = np.zeros(p)
         cost[j] = -1.0
         h.changeColsCost(p, cols, cost)
+        if use_bases:
+            h.setBasis(bases[j])
         h.run()
         iters += int(h.getInfo().simplex_iteration_count)
         if h.getModelStatus() != _OPTIMAL:
@@ -118,11 +126,12 @@ def halfwidths(W) -> HalfWidths:
         delta[j] = np.asarray(sol.col_value)
         duals[j] = np.asarray(sol.row_dual)
         out_h[j] = delta[j, j]
+        out_bases.append(h.getBasis())
     # HiGHS's sign convention: c = W^T y + z. Flip if a build uses the opposite one (checked, not assumed).
     ref = duals @ W  # (p, p), should be -I
     if np.allclose(ref, np.eye(p), atol=1e-6):
         duals = -duals
-    return HalfWidths(out_h, delta, duals, iters)
+    return HalfWidths(out_h, delta, duals, iters, tuple(out_bases))
 
 
 def smooth_max(h, targets, beta: float = BETA):
@@ -209,7 +218,7 @@ class HalfwidthProblem(CoefficientProblem):
         super().__init__(*args, **kwargs)
         self.targets = np.asarray(targets, float)
         self.speed_threshold, self.half_window_s, self.beta = float(speed_threshold), float(half_window_s), beta
-        self.last = None
+        self.last, self._last_keep = None, None
 
     def _rows(self, y):
         qd, qdd = y[:, _QD], y[:, _QDD]
@@ -231,14 +240,15 @@ class HalfwidthProblem(CoefficientProblem):
         if keep.sum() < 14:
             return None
         W = self.regressor(y)[keep]
+        same_rows = self.last is not None and self._last_keep is not None and np.array_equal(self._last_keep, keep)
         try:
-            hw = halfwidths(W)
+            hw = halfwidths(W, self.last.bases if same_rows else None)
         except RuntimeError:
             return None
         if np.any(hw.h >= 0.5 * BIG) or np.any(hw.h <= 0):
             return None
         F, weights = smooth_max(hw.h, self.targets, self.beta)
-        self.last = hw
+        self.last, self._last_keep = hw, keep
         if dy is None:
             return F, None
         G = np.zeros((y.shape[0] * 4, 14))
