@@ -27,7 +27,8 @@ def models_dir() -> Path:
 DEFAULT_MODEL_PATH = models_dir() / "h4.xml"
 MOTOR_JOINTS = ("q1", "q2", "q3", "q4")
 NACELLE_JOINTS = ("x", "y", "z", "theta")
-FOREARM_TENDONS = ("forearm1", "forearm2", "forearm3", "forearm4")
+FOREARM_RODS = ("forearm_rod1", "forearm_rod2", "forearm_rod3", "forearm_rod4")
+INVWEIGHT_SCALE_NAME = "h4_invweight_scale"
 
 
 class ModelError(ValueError):
@@ -47,6 +48,34 @@ def load_model(path: str | Path | None = None) -> mujoco.MjModel:
     except Exception as exc:  # mujoco raises ValueError with the compiler's message
         raise ModelError(f"model path {str(path)!r} is not a valid MJCF model: {exc}") from exc
     _check_structure(model, path)
+    apply_solver_constants(model)
+    return model
+
+
+def apply_solver_constants(model: mujoco.MjModel) -> mujoco.MjModel:
+    """Recompute the model's constants (``mj_setConst`` at qpos0) and scale the constraint inverse weights of
+    everything but the motors by the model's custom numeric ``h4_invweight_scale`` (models/README.md).
+
+    MuJoCo's constraint softness is ``R = (1 - d) / d * invweight`` and ``d <= 0.9999`` in MJCF, so the
+    equality rows' regulariser can only be lowered further through the inverse weights: ``body_invweight0``,
+    ``tendon_invweight0`` and ``dof_invweight0`` of the non-motor joints (the motors keep theirs, so their
+    friction constraints are unchanged). Idempotent: it starts from ``mj_setConst`` each time, so call it
+    (instead of ``mj_setConst``) after editing a compiled model. Used by :func:`load_model` and the
+    ``sim.variants`` builders. Returns ``model`` (edited in place)."""
+    if not isinstance(model, mujoco.MjModel):
+        raise TypeError(f"model must be a mujoco.MjModel, got {type(model).__name__}")
+    mujoco.mj_setConst(model, mujoco.MjData(model))
+    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, INVWEIGHT_SCALE_NAME)
+    if i < 0:
+        return model
+    scale = float(model.numeric_data[model.numeric_adr[i]])
+    if not 0.0 < scale <= 1.0:
+        raise ModelError(f"custom numeric {INVWEIGHT_SCALE_NAME!r} must be in (0, 1], got {scale!r}")
+    motor_dofs = [model.jnt_dofadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)] for n in MOTOR_JOINTS]
+    others = np.setdiff1d(np.arange(model.nv), motor_dofs)
+    model.dof_invweight0[others] *= scale
+    model.body_invweight0[:] *= scale
+    model.tendon_invweight0[:] *= scale
     return model
 
 
@@ -55,9 +84,15 @@ def _check_structure(model: mujoco.MjModel, path) -> None:
     for name in names:
         if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name) < 0:
             raise ModelError(f"model {str(path)!r} must define joint {name!r} (an H4 needs joints {names})")
-    for name in FOREARM_TENDONS:
-        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, name) < 0:
-            raise ModelError(f"model {str(path)!r} must define the forearm tendon {name!r}")
+    for i, name in enumerate(FOREARM_RODS):
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"rod_end{i + 1}")
+        if body < 0 or site < 0 or model.site_bodyid[site] != body:
+            raise ModelError(f"model {str(path)!r} must define the forearm rod body {name!r} with site "
+                             f"'rod_end{i + 1}' (its far end, held at A{i + 1})")
+        if model.body_jntnum[body] != 2:
+            raise ModelError(f"forearm rod {name!r} of model {str(path)!r} must have 2 hinges (a universal joint "
+                             f"at the arm tip), got {model.body_jntnum[body]} joints")
     if model.nu != 4:
         raise ModelError(f"model {str(path)!r} must have 4 actuators (one per motor), got {model.nu}")
 
@@ -100,6 +135,11 @@ class H4Geometry:
     lateral_qpos0: np.ndarray  # (k,)
     nq: int
     dof_motor: np.ndarray  # (4,) dof addresses of q1..q4
+    # forearm rods: hinges a (local z) then b (local y) at B_i, far end r0 in the arm frame at qpos0
+    qpos_rod: np.ndarray  # (4, 2) qpos addresses of rod{i}_a, rod{i}_b
+    rod_end: np.ndarray  # (4, 3) the rod's far end in its own (= the arm's, at zero angles) frame [m]
+    arm_rot0: np.ndarray  # (4, 3, 3) world orientation of each arm frame at q = 0
+    motor_axis_local: np.ndarray  # (4, 3) each motor axis in its arm frame
 
     @classmethod
     def from_model(cls, model: mujoco.MjModel) -> "H4Geometry":
@@ -144,10 +184,22 @@ class H4Geometry:
             if model.body_jntnum[b] != 1:
                 raise ModelError("each lateral bar must have exactly one hinge (its rotation relative to the nacelle)")
             lateral_joints.append(model.body_jntadr[b])
-        ten_ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, n) for n in FOREARM_TENDONS]
-        l = np.array([data.ten_length[t] for t in ten_ids])
-        if not np.allclose(l, np.linalg.norm(B - A, axis=1), rtol=0, atol=1e-12):
-            raise ModelError("the forearm tendons must run straight from B_i to A_i")
+        rods = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in FOREARM_RODS]
+        rod_end = np.array([model.site_pos[sid(f"rod_end{i + 1}")] for i in range(4)])
+        for i, b in enumerate(rods):
+            arm_body = model.jnt_bodyid[motor_ids[i]]
+            axes = model.jnt_axis[model.body_jntadr[b]:model.body_jntadr[b] + 2]
+            if (model.body_parentid[b] != arm_body or not np.allclose(model.body_quat[b], [1, 0, 0, 0], atol=0)
+                    or not np.array_equal(axes, [[0, 0, 1], [0, 1, 0]])):
+                raise ModelError(f"forearm rod {FOREARM_RODS[i]!r} must be a child of its arm, unrotated, with "
+                                 f"hinge axes (0 0 1) then (0 1 0), got axes {axes.tolist()}")
+            if np.abs(data.xpos[b] - B[i]).max() > 1e-12:
+                raise ModelError(f"forearm rod {FOREARM_RODS[i]!r} must start at the arm tip B{i + 1}")
+        rod_tip = np.array([data.site_xpos[sid(f"rod_end{i + 1}")] for i in range(4)])
+        if np.abs(rod_tip - A).max() > 1e-12:
+            raise ModelError("the model must be assembled closed: each rod_end_i must coincide with A_i at qpos0 "
+                             f"(off by {np.abs(rod_tip - A).max():.3g} m; write the rod vectors at full precision)")
+        l = np.linalg.norm(rod_end, axis=1)
         key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
         nac_adr = np.array([model.jnt_qposadr[j] for j in nac_ids])
         qpos_home = model.key_qpos[key] if key >= 0 else model.qpos0
@@ -163,6 +215,9 @@ class H4Geometry:
             nacelle_qpos0=nacelle_qpos0, nacelle_origin0=origin0,
             lateral_qpos0=np.array([model.qpos0[model.jnt_qposadr[j]] for j in lateral_joints]),
             dof_motor=np.array([model.jnt_dofadr[j] for j in motor_ids]),
+            qpos_rod=np.array([[model.jnt_qposadr[model.body_jntadr[b] + k] for k in (0, 1)] for b in rods]),
+            rod_end=rod_end, motor_axis_local=np.array([model.jnt_axis[j] for j in motor_ids]),
+            arm_rot0=np.array([data.xmat[model.jnt_bodyid[j]].reshape(3, 3) for j in motor_ids]),
         )
         for v in arrays.values():
             v.setflags(write=False)
@@ -179,7 +234,32 @@ class H4Geometry:
         out[:, self.qpos_nacelle] = self.nacelle_qpos0 + (x2 - self.nacelle_origin0)
         dtheta = x2[:, 3] - self.nacelle_origin0[3]
         out[:, self.qpos_lateral] = self.lateral_qpos0[None, :] - dtheta[:, None]
+        out[:, self.qpos_rod] = self.rod_angles(q2, x2)
         return out[0] if single else out
+
+    def rod_angles(self, q, x) -> np.ndarray:
+        """Forearm rod hinge angles (n, 4, 2) [rad] that put each rod's far end on A_i(x), arm at q (n, 4).
+
+        In the arm frame the rod vector v = R_arm(q)^T (A_i - B_i) must equal Rz(a) Ry(b) r0 (r0 = ``rod_end``):
+        Ry keeps the y component and Rz the z component, so b solves -r0x sin b + r0z cos b = v_z (the root
+        nearest 0) and a = atan2(v_y, v_x) - atan2(r0y, r0x cos b + r0z sin b)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        from sim.kinematics import arm_tips, nacelle_points
+
+        w = nacelle_points(self, x)[0] - arm_tips(self, q)  # (n, 4, 3) world
+        w = np.einsum("iba,nib->nia", self.arm_rot0, w)  # arm frame at q = 0
+        k = self.motor_axis_local[None]
+        c, s = np.cos(q)[..., None], np.sin(q)[..., None]
+        v = w * c - s * np.cross(k, w) + (1 - c) * np.sum(k * w, axis=-1, keepdims=True) * k  # rotate by -q
+        r0x, r0y, r0z = self.rod_end[:, 0], self.rod_end[:, 1], self.rod_end[:, 2]
+        rho, phi = np.hypot(r0x, r0z), np.arctan2(r0x, r0z)  # r0z cos b - r0x sin b = rho cos(b + phi)
+        root = np.arccos(np.clip(v[..., 2] / rho, -1.0, 1.0))
+        b1, b2 = root - phi, -root - phi
+        b1, b2 = np.angle(np.exp(1j * b1)), np.angle(np.exp(1j * b2))
+        b = np.where(np.abs(b1) <= np.abs(b2), b1, b2)
+        a = np.arctan2(v[..., 1], v[..., 0]) - np.arctan2(r0y, r0x * np.cos(b) + r0z * np.sin(b))
+        return np.stack([np.angle(np.exp(1j * a)), b], axis=-1)
 
     def nacelle_pose(self, qpos) -> np.ndarray:
         """Nacelle pose x (n, 4) read from MuJoCo qpos (n, nq)."""

@@ -6,16 +6,25 @@ Per sample k (period ``dt``, ``substeps`` MuJoCo steps of ``h = dt / substeps``,
     q_meas  = quantise(q_k)                           encoder, ``encoder_counts`` per turn
     qd_est  = VelocityFilter(q_meas)                  the controller's velocity estimate
     tau_cmd = controller(q_ref, qd_ref, q_meas, qd_est, feedforward)     (clipped at +-15 N m)
-    tau_app = tau_cmd + e_k,  |e_k| <= delta          the paper's error on the input
-    measured torque = tau_cmd  (= G_T V_T: the current reference is what the robot logs)
+    tau_app = tau_cmd + e_k,  e_k = stream.at(k, q_k, tau_cmd)      the error on the input
+    logged torque = stream.measured(tau_cmd)  (TorqueNoise: tau_cmd = G_T V_T, the current reference)
 
-MuJoCo clips the applied torque at the actuator range; the recorded noise is ``applied - measured`` after that
-clipping, which never increases |e|. The ground truth records the exact state at each sample instant and the
-acceleration MuJoCo computed from it.
+The torque error follows a small protocol, so that structured error models (another module) plug in:
+``stream = noise.start(t, rng)`` (t (n,) sample times from 0 [s], rng a numpy Generator) gives
+``stream.at(k, q, tau_cmd) -> (4,)`` [N m] per sample (q (4,) true motor angles [rad], tau_cmd (4,) the clipped
+command) and ``stream.measured(tau_cmd (n, 4)) -> (n, 4)`` the logged torques; ``noise.bound`` [N m] bounds
+``|applied - logged|`` and ``noise.describe()`` is a JSON-able dict. :class:`TorqueNoise` implements it.
+
+Each sample is recorded AT the sampled state: ``mj_forward`` with the new command gives MuJoCo's
+acceleration, applied (actuator-clipped) torque and loop violation there; then the integrator advances
+(``mj_RungeKutta`` for RK4: ``mj_forward`` + ``mj_RungeKutta`` is exactly ``mj_step``, whose ``qacc``
+would otherwise be the RK4 step average). The ground truth's noise is ``applied - logged`` after MuJoCo's
+clipping, which never increases |e| for TorqueNoise.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import time
 from dataclasses import asdict, dataclass, field
@@ -26,7 +35,7 @@ import numpy as np
 from sim.controller import JointController, VelocityFilter, design_joint_controller
 from sim.dataset import Dataset, GroundTruth
 from sim.kinematics import _jacobians, forward_kinematics
-from sim.model import H4Geometry
+from sim.model import NACELLE_JOINTS, H4Geometry
 from sim.truth import TRUE_PARAMETER_ORDER, true_parameters
 
 NOISE_SHAPES = ("uniform", "square", "sine", "array", "none")
@@ -85,6 +94,26 @@ class TorqueNoise:
         d = asdict(self)
         d.pop("values")
         return d
+
+    def start(self, t: np.ndarray, rng: np.random.Generator) -> "PrecomputedTorqueError":
+        """The per-sample error stream for sample times t (n,) [s] (the draws of :meth:`sample`)."""
+        return PrecomputedTorqueError(self.sample(np.asarray(t, dtype=float), rng))
+
+
+class PrecomputedTorqueError:
+    """A torque-error stream from precomputed values e (n, 4) [N m]: ``at(k, q, tau_cmd) = e[k]``; the logged
+    torque is the command itself."""
+
+    __slots__ = ("e",)
+
+    def __init__(self, e: np.ndarray) -> None:
+        self.e = np.asarray(e, dtype=float)
+
+    def at(self, k: int, q: np.ndarray, tau_cmd: np.ndarray) -> np.ndarray:
+        return self.e[k]
+
+    def measured(self, tau_cmd: np.ndarray) -> np.ndarray:
+        return np.array(tau_cmd, dtype=float)
 
 
 def quantise(q: np.ndarray, counts_per_turn: int | None) -> np.ndarray:
@@ -179,10 +208,16 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     if feedforward.shape != (n, 4):
         raise SimulationError(f"feedforward must have shape ({n}, 4), got {feedforward.shape}")
 
+    for attr in ("start", "bound", "describe"):
+        if not hasattr(noise, attr):
+            raise SimulationError(f"noise must implement the torque-error protocol (start, bound, describe), "
+                                  f"got {type(noise).__name__} without {attr!r}")
+
     geometry = H4Geometry.from_model(model)
     rng = np.random.default_rng(seed)
-    e = noise.sample(t - t[0], rng)
+    stream = noise.start(t - t[0], rng)
     data = mujoco.MjData(model)
+    advance = _integrator_step(model, data, substeps)
     x0 = forward_kinematics(geometry, q_ref[0])
     data.qpos[:] = geometry.qpos(q_ref[0], x0)
     data.qvel[:] = 0.0
@@ -190,44 +225,49 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     vfilter = VelocityFilter(dt=dt, cutoff_hz=settings.velocity_filter_hz)
     vfilter.reset(q0=quantise(q_ref[0], settings.encoder_counts))
     controller.reset()
-
-    out = {k: np.empty((n, 4)) for k in ("q", "qd", "qdd", "x", "xdd", "tau_app", "q_meas", "tau_cmd")}
-    o_q, o_qd, o_qdd, o_x, o_xdd, o_app, o_qm, o_cmd = (out[k] for k in
-                                                       ("q", "qd", "qdd", "x", "xdd", "tau_app", "q_meas", "tau_cmd"))
     ne = data.ne  # equality rows come first in efc and their number is fixed
-    efc = np.zeros((n, max(ne, 1)))
-    qm, dm, nac = geometry.qpos_motor, geometry.dof_motor, geometry.qpos_nacelle
-    lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
     res = 2 * np.pi / settings.encoder_counts if settings.encoder_counts else None
-    qpos, qvel, qacc, ctrl, act = data.qpos, data.qvel, data.qacc, data.ctrl, data.actuator_force
-    # the controller's unchecked core when it has one (inputs are checked once above)
-    law = getattr(controller, "step", None) or (lambda qr, vr, qq, vv, f: controller(qr, vr, qq, vv, feedforward=f))
-    step = mujoco.mj_step
+    lo, hi = model.actuator_ctrlrange[:, 0].copy(), model.actuator_ctrlrange[:, 1].copy()
+    if type(controller) is JointController:  # same law on Python floats (numpy costs ~1 us per call on (4,))
+        law = _FloatLaw(controller, vfilter, res, lo, hi, q_ref, qd_ref, feedforward)
+    else:
+        law = _ArrayLaw(controller, vfilter, res, lo, hi, q_ref, qd_ref, feedforward)
+
+    rec_qpos, rec_qvel, rec_qacc = np.empty((n, model.nq)), np.empty((n, model.nv)), np.empty((n, model.nv))
+    rec_app, efc = np.empty((n, 4)), np.zeros((n, max(ne, 1)))
+    rec_cmd, rec_qm = [], []
+    qm = _index(geometry.qpos_motor)
+    qpos, qvel, qacc, ctrl, act, efc_pos = data.qpos, data.qvel, data.qacc, data.ctrl, data.actuator_force, data.efc_pos
+    at, forward, law_step, array = stream.at, mujoco.mj_forward, law.step, np.array
+    append_cmd, append_qm = rec_cmd.append, rec_qm.append
     wall = time.perf_counter()
     for k in range(n):
-        q_true = qpos[qm]
-        q_meas = np.round(q_true / res) * res if res else q_true
-        tau_cmd = np.clip(law(q_ref[k], qd_ref[k], q_meas, vfilter.step(q_meas), feedforward[k]), lo, hi)
-        ctrl[:] = tau_cmd + e[k]
-        o_q[k] = q_true
-        o_qd[k] = qvel[dm]
-        o_x[k] = qpos[nac]
-        o_qm[k] = q_meas
-        o_cmd[k] = tau_cmd
-        step(model, data)
-        o_qdd[k] = qacc[dm]
-        o_xdd[k] = qacc[nac]
-        o_app[k] = act
-        efc[k, :ne] = data.efc_pos[:ne]
-        if substeps > 1:
-            step(model, data, substeps - 1)
+        q_true = qpos[qm].copy()  # the noise stream may keep it
+        q_meas, tau_cmd = law_step(k, q_true)
+        tau_cmd = array(tau_cmd)
+        ctrl[:] = tau_cmd + at(k, q_true, tau_cmd)
+        forward(model, data)  # at the sampled state: MuJoCo's qacc, applied torque, loop violation
+        rec_qpos[k] = qpos
+        rec_qvel[k] = qvel
+        rec_qacc[k] = qacc
+        rec_app[k] = act
+        efc[k, :ne] = efc_pos[:ne]
+        append_cmd(tau_cmd)
+        append_qm(q_meas)
+        advance()
         if progress is not None and k % 1000 == 0:
             progress(k, n)
-    violation = np.abs(efc).max(axis=1)
-    out["x"] = geometry.nacelle_origin0 + (out["x"] - geometry.nacelle_qpos0)  # raw nacelle qpos -> pose
     wall = time.perf_counter() - wall
-    if not np.all(np.isfinite(out["q"])):
+    law.finish()
+    rec_cmd, rec_qm = np.array(rec_cmd, dtype=float), np.array(rec_qm, dtype=float)
+    if not np.all(np.isfinite(rec_qpos)):
         raise SimulationError("the simulation diverged (non-finite state); check the reference and the controller")
+    violation = np.abs(efc).max(axis=1)
+    dm = geometry.dof_motor
+    nac_dof = model.jnt_dofadr[[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in NACELLE_JOINTS]]
+    logged = np.asarray(stream.measured(rec_cmd.copy()), dtype=float)
+    if logged.shape != (n, 4):
+        raise SimulationError(f"noise stream's measured() must return shape ({n}, 4), got {logged.shape}")
 
     meta = {
         "kind": "simulation",
@@ -244,10 +284,107 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
         "versions": _package_versions(),
     }
     meta.update(metadata or {})
-    dataset = Dataset(t=t.copy(), q=out["q_meas"], tau=out["tau_cmd"], metadata=meta)
+    dataset = Dataset(t=t.copy(), q=rec_qm, tau=logged, metadata=meta)
     truth = GroundTruth(
-        theta=true_parameters(model) if theta_true is None else np.asarray(theta_true, dtype=float), q=out["q"], qd=out["qd"], qdd=out["qdd"], x=out["x"], xdd=out["xdd"],
-        tau_applied=out["tau_app"], noise=out["tau_app"] - out["tau_cmd"], loop_violation=violation, h=h,
-        names=TRUE_PARAMETER_ORDER,
+        theta=true_parameters(model) if theta_true is None else np.asarray(theta_true, dtype=float),
+        q=rec_qpos[:, geometry.qpos_motor], qd=rec_qvel[:, dm], qdd=rec_qacc[:, dm],
+        x=geometry.nacelle_pose(rec_qpos), xdd=rec_qacc[:, nac_dof],
+        tau_applied=rec_app, noise=rec_app - logged, loop_violation=violation, h=h, names=TRUE_PARAMETER_ORDER,
     )
     return dataset, truth
+
+
+def _index(addresses: np.ndarray):
+    """A basic slice for evenly spaced addresses (cheaper than fancy indexing in the loop), else the array."""
+    a = np.asarray(addresses)
+    step = int(a[1] - a[0]) if a.size > 1 else 1
+    if step > 0 and np.array_equal(a, a[0] + step * np.arange(a.size)):
+        return slice(int(a[0]), int(a[-1]) + 1, step)
+    return a
+
+
+def _integrator_step(model: mujoco.MjModel, data: mujoco.MjData, substeps: int):
+    """``advance()``: the rest of one sample period (``substeps`` MuJoCo steps) after ``mj_forward`` at the
+    current state; the first step reuses that ``mj_forward``, as ``mj_step`` would."""
+    integ = mujoco.mjtIntegrator(model.opt.integrator)
+    first = {mujoco.mjtIntegrator.mjINT_RK4: functools.partial(mujoco.mj_RungeKutta, model, data, 4),
+             mujoco.mjtIntegrator.mjINT_EULER: functools.partial(mujoco.mj_Euler, model, data),
+             mujoco.mjtIntegrator.mjINT_IMPLICIT: functools.partial(mujoco.mj_implicit, model, data),
+             mujoco.mjtIntegrator.mjINT_IMPLICITFAST: functools.partial(mujoco.mj_implicit, model, data)}.get(integ)
+    if first is None:
+        raise SimulationError(f"model integrator {integ.name} is not supported by simulate")
+    if substeps == 1:
+        return first
+
+    def advance(_first=first, _step=mujoco.mj_step):
+        _first()
+        _step(model, data, substeps - 1)
+    return advance
+
+
+class _ArrayLaw:
+    """Any controller: ``controller.step(q_ref, qd_ref, q, qd, ff)`` (or its call) on (4,) arrays."""
+
+    def __init__(self, controller, vfilter, res, lo, hi, q_ref, qd_ref, ff):
+        self.law = getattr(controller, "step", None) or (
+            lambda qr, vr, qq, vv, f: controller(qr, vr, qq, vv, feedforward=f))
+        self.vfilter, self.res, self.lo, self.hi = vfilter, res, lo, hi
+        self.q_ref, self.qd_ref, self.ff = q_ref, qd_ref, ff
+
+    def step(self, k, q_true):
+        res = self.res
+        q_meas = np.round(q_true / res) * res if res else q_true
+        tau = np.clip(self.law(self.q_ref[k], self.qd_ref[k], q_meas, self.vfilter.step(q_meas), self.ff[k]),
+                      self.lo, self.hi)
+        return q_meas, tau
+
+    def finish(self):
+        pass
+
+
+class _FloatLaw:
+    """:meth:`JointController.step` after :meth:`VelocityFilter.step` and the encoder rounding, operation for
+    operation on Python floats (the same IEEE results; a test checks the two paths agree bit for bit). The
+    controller's and filter's states are read at the start and written back by :meth:`finish`."""
+
+    def __init__(self, c: JointController, vf: VelocityFilter, res, lo, hi, q_ref, qd_ref, ff):
+        self.c, self.vf, self.res = c, vf, res
+        self.gains = list(zip(c.kp.tolist(), c.kv.tolist(), (0.5 * c.ki * c.dt).tolist(),
+                              [(-t, t, lo_i, hi_i) for t, lo_i, hi_i in zip(c.tau_max.tolist(), lo.tolist(),
+                                                                           hi.tolist())]))
+        self.integ, self.e_prev, self.sat = c.integrator.tolist(), c._e_prev.tolist(), c.saturated.tolist()
+        self.pole, self.gain = vf.pole, vf.gain
+        self.qd_est = vf._qd.tolist()
+        self.q_prev = None if vf._q_prev is None else vf._q_prev.tolist()
+        self.q_ref, self.qd_ref, self.ff = q_ref.tolist(), qd_ref.tolist(), ff.tolist()
+
+    def step(self, k, q_true):
+        res = self.res
+        qm = [round(v / res) * res for v in q_true.tolist()] if res else q_true.tolist()
+        q_prev = qm if self.q_prev is None else self.q_prev
+        p, g = self.pole, self.gain
+        integ, e_prev, qd_est, tau, sat = [], [], [], [], []
+        for (kp, kv, kidt, (nt, t, lo, hi)), qmi, qpi, vi, ii, epi, qri, vri, fi in zip(
+                self.gains, qm, q_prev, self.qd_est, self.integ, self.e_prev, self.q_ref[k], self.qd_ref[k],
+                self.ff[k]):
+            v = p * vi + g * (qmi - qpi)  # VelocityFilter.step
+            e = kp * (qri - qmi) + vri - v  # JointController.step from here
+            cand = ii + kidt * (e + epi)
+            cand = nt if cand < nt else (t if cand > t else cand)
+            u = kv * e + cand + fi
+            if not (abs(u) > t and (e > 0) - (e < 0) == (u > 0) - (u < 0)):
+                ii = cand
+            u = kv * e + ii + fi
+            qd_est.append(v)
+            e_prev.append(e)
+            integ.append(ii)
+            sat.append(abs(u) > t)
+            u = nt if u < nt else (t if u > t else u)
+            tau.append(hi if u > hi else (lo if u < lo else u))  # simulate's clip at the actuator range
+        self.q_prev, self.qd_est, self.integ, self.e_prev, self.sat = qm, qd_est, integ, e_prev, sat
+        return qm, tau
+
+    def finish(self):
+        c, vf = self.c, self.vf
+        c.integrator, c._e_prev, c.saturated = np.array(self.integ), np.array(self.e_prev), np.array(self.sat)
+        vf._qd, vf._q_prev = np.array(self.qd_est), np.array(self.q_prev)

@@ -9,7 +9,12 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from sim.model import MOTOR_JOINTS, ModelError
+from sim.model import FOREARM_RODS, MOTOR_JOINTS, ModelError
+
+# a forearm rod counts as the paper's massless forearm (its mass lumped at A_i on the nacelle) when its centre
+# of mass is its far end and its own inertia is below this [kg m^2] (the MJCF's 1e-12: MuJoCo needs > 0)
+POINT_MASS_INERTIA = 1e-9
+POINT_MASS_OFFSET = 1e-12  # [m] centre of mass to rod end
 
 TRUE_PARAMETER_ORDER = ("Imot1", "Imot2", "Imot3", "Imot4", "Mnac", "Ibc",
                         "Fv1", "Fv2", "Fv3", "Fv4", "Fs1", "Fs2", "Fs3", "Fs4")
@@ -33,8 +38,26 @@ def _inertia_world(data, body: int, model) -> np.ndarray:
     return rot @ np.diag(model.body_inertia[body]) @ rot.T
 
 
+def _rods(model) -> list[tuple[int, int]]:
+    """(rod body, lateral body carrying A_i) per chain; raises unless each rod is a point mass at its far end."""
+    out = []
+    for i, name in enumerate(FOREARM_RODS):
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        end = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"rod_end{i + 1}")
+        a = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"A{i + 1}")
+        if (np.abs(model.body_ipos[body] - model.site_pos[end]).max() > POINT_MASS_OFFSET
+                or model.body_inertia[body].max() > POINT_MASS_INERTIA):
+            raise ModelError(f"forearm rod {name!r} must be a point mass at its far end 'rod_end{i + 1}' (the paper's "
+                             f"massless forearm with its lower half lumped at A_i); got centre of mass "
+                             f"{model.body_ipos[body].tolist()} and inertia {model.body_inertia[body].tolist()} - "
+                             "pass the truth explicitly (e.g. sim.broken_hypotheses_model's)")
+        out.append((body, model.site_bodyid[a]))
+    return out
+
+
 def nacelle_mass_matrix(model: mujoco.MjModel) -> np.ndarray:
-    """The nacelle's 4x4 kinetic-energy matrix in (xd, yd, zd, thetad) at qpos0, lateral bars translating.
+    """The nacelle's 4x4 kinetic-energy matrix in (xd, yd, zd, thetad) at qpos0, lateral bars translating,
+    including the forearm rods' point masses at the attachment points A_i (they move with their lateral bar).
 
     The paper's model holds when it is diag(Mnac, Mnac, Mnac, Ibc) (checked by a test).
     """
@@ -57,6 +80,9 @@ def nacelle_mass_matrix(model: mujoco.MjModel) -> np.ndarray:
             w_izz = 0.0
         m4 += mass * jv.T @ jv
         m4[3, 3] += w_izz
+    for rod, bar in _rods(model):  # a point at A_i on a translating bar moves like the bar's origin C_k
+        jv = np.column_stack([np.eye(3), np.cross(z, data.xpos[bar] - origin)])
+        m4 += model.body_mass[rod] * jv.T @ jv
     return m4
 
 
@@ -64,7 +90,8 @@ def true_parameters(model: mujoco.MjModel) -> np.ndarray:
     """The 14 true parameter values (SI) of the paper's model, from the compiled model.
 
     Imot_i = armature_i + inertia of the arm body about the motor axis (the arm's inertial lumps the upper
-    half of the forearm); Mnac, Ibc from the nacelle's kinetic energy (:func:`nacelle_mass_matrix`);
+    half of the forearm); Mnac, Ibc from the nacelle's kinetic energy (:func:`nacelle_mass_matrix`, with the
+    forearm rods' point masses at A_i);
     Fv_i = joint damping; Fs_i = joint frictionloss.
     """
     if not isinstance(model, mujoco.MjModel):
@@ -73,12 +100,15 @@ def true_parameters(model: mujoco.MjModel) -> np.ndarray:
     data.qpos[:] = model.qpos0
     mujoco.mj_kinematics(model, data)
     imot, fv, fs = [], [], []
+    rods = {b for rod, _ in _rods(model) for b in _subtree_bodies(model, rod)}
     for name in MOTOR_JOINTS:
         j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
         dof = model.jnt_dofadr[j]
         axis, anchor = data.xaxis[j], data.xanchor[j]
         inertia = 0.0
         for b in _subtree_bodies(model, model.jnt_bodyid[j]):
+            if b in rods:  # counted on the nacelle (nacelle_mass_matrix)
+                continue
             if model.body_jntnum[b] and b != model.jnt_bodyid[j]:
                 raise ModelError(f"the arm of {name} must be a single rigid body (found a jointed child body)")
             r = data.xipos[b] - anchor

@@ -8,7 +8,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.model import DEFAULT_MODEL_PATH, MOTOR_JOINTS, ModelError, _check_structure
+from sim.model import DEFAULT_MODEL_PATH, MOTOR_JOINTS, ModelError, _check_structure, apply_solver_constants
 
 
 def _spec(path) -> mujoco.MjSpec:
@@ -24,7 +24,7 @@ def _spec(path) -> mujoco.MjSpec:
 def _compile(spec: mujoco.MjSpec, path) -> mujoco.MjModel:
     model = spec.compile()
     _check_structure(model, path)
-    return model
+    return apply_solver_constants(model)
 
 
 def randomised_model(seed: int, spread: float = 0.3, path=None) -> mujoco.MjModel:
@@ -63,8 +63,9 @@ def broken_hypotheses_model(arm_com_offset=0.0, forearm_mass: float = 0.0, path=
     the paper's 14, ``MXa1..4``, ``mf1..4``, see ``ident.regressor``).
 
     arm_com_offset : scalar or (4,) [m], each arm's centre of mass moved out along the arm (unbalanced arms);
-    forearm_mass : [kg] each forearm becomes a uniform thin rod body (universal joint at the arm tip B_i, a
-    ``connect`` equality at the nacelle point A_i) instead of a massless tendon. The paper's parameters then
+    forearm_mass : [kg] each forearm rod body (universal joint at the arm tip B_i, ``connect`` equality at the
+    nacelle point A_i, as in the default model) gains a uniform thin rod of this mass besides the point mass at
+    its far end that the default model's paper parameters already count. The paper's parameters then
     hold the rod's two lumped halves (m/2 at B_i: Imot += m L^2 / 2 and a first moment MXa += m L / 2; m/2 at
     A_i: Mnac += m / 2, Ibc += m |DC_i|^2 / 2) and ``mf_i = m`` carries the rest (the rod minus its halves).
     """
@@ -84,35 +85,28 @@ def broken_hypotheses_model(arm_com_offset=0.0, forearm_mass: float = 0.0, path=
     spec = _spec(path)
     for i, r in enumerate(offsets):
         spec.body(f"arm{i + 1}").ipos = [r, 0.0, 0.0]
-    data = mujoco.MjData(base)
-    mujoco.mj_kinematics(base, data)
     for i in range(4):
-        arm_id = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_BODY, f"arm{i + 1}")
-        b_site = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_SITE, f"B{i + 1}")
-        a_site = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_SITE, f"A{i + 1}")
-        rot_arm = data.xmat[arm_id].reshape(3, 3)
-        along = rot_arm.T @ (data.site_xpos[a_site] - data.site_xpos[b_site])
-        length = float(np.linalg.norm(along))
-        x = along / length
-        helper = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        y = np.cross(helper, x)
-        y /= np.linalg.norm(y)
-        quat = np.zeros(4)
-        mujoco.mju_mat2Quat(quat, np.column_stack([x, y, np.cross(x, y)]).ravel())
-        rod = spec.body(f"arm{i + 1}").add_body(name=f"forearm_rod{i + 1}", pos=base.site_pos[b_site], quat=quat)
-        rod.add_joint(name=f"rod{i + 1}_a", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
-        rod.add_joint(name=f"rod{i + 1}_b", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+        # the model's rod keeps its point mass at the far end (counted in the 14 parameters) and gains a
+        # uniform thin rod of forearm_mass from B_i to A_i: one rigid body, closed like the default model
+        rod = spec.body(f"forearm_rod{i + 1}")
+        end = np.asarray(base.site_pos[mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_SITE, f"rod_end{i + 1}")])
+        point_mass, point_inertia = float(rod.mass), np.asarray(rod.inertia, dtype=float)
+        total = point_mass + forearm_mass
+        com = (point_mass * end + forearm_mass * end / 2) / total
+        axis = end / np.linalg.norm(end)
+        inertia = np.diag(point_inertia).astype(float)
+        for mass, at in ((point_mass, end), (forearm_mass, end / 2)):
+            r = at - com
+            inertia += mass * (r @ r * np.eye(3) - np.outer(r, r))
+        inertia += forearm_mass * float(end @ end) / 12 * (np.eye(3) - np.outer(axis, axis))  # thin uniform rod
         rod.explicitinertial = True
-        rod.mass = forearm_mass
-        rod.ipos = [length / 2, 0.0, 0.0]
-        rod.inertia = [1e-9, forearm_mass * length**2 / 12, forearm_mass * length**2 / 12]  # thin uniform rod
-        rod.add_site(name=f"rod_end{i + 1}", pos=[length, 0.0, 0.0])
-        loop = spec.equality(f"loop{i + 1}")
-        solref, solimp = list(loop.solref), list(loop.solimp)
-        spec.delete(loop)
-        eq = spec.add_equality(name=f"rod_loop{i + 1}", type=mujoco.mjtEq.mjEQ_CONNECT,
-                               objtype=mujoco.mjtObj.mjOBJ_SITE, name1=f"rod_end{i + 1}", name2=f"A{i + 1}")
-        eq.solref, eq.solimp = solref, solimp
+        rod.mass, rod.ipos = total, com
+        evals, evecs = np.linalg.eigh(inertia)  # principal axes: MjSpec takes diagonal inertia + iquat
+        if np.linalg.det(evecs) < 0:
+            evecs[:, 0] = -evecs[:, 0]
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, evecs.ravel())
+        rod.inertia, rod.iquat = evals, quat
     model = _compile(spec, path)
     half = forearm_mass / 2.0
     theta[:4] += half * geometry.arm_length**2

@@ -35,19 +35,40 @@ def random_workspace_poses(rng, n):
     ])
 
 
-def record_exact(model, geometry, seconds=2.0, seed=0, timestep=None):
-    """Track a smooth reference with a PD law; record, at every MuJoCo step, the exact state (q, qd),
-    MuJoCo's joint acceleration qdd, the applied motor torques, the nacelle pose and acceleration, and the
-    loop violation. The reference: sums of sines of the nacelle pose around home, through the inverse
-    kinematics (a joint-space reference would spin the nacelle into a singularity)."""
-    m = model
-    if timestep is not None:
-        m = mujoco.MjModel.from_xml_path(str(sim.DEFAULT_MODEL_PATH))
-        m.opt.timestep = timestep
-        m.eq_solref[:, 0] = 2 * timestep
-        m.dof_solref[:, 0] = 2 * timestep
-    d = mujoco.MjData(m)
-    h = m.opt.timestep
+def _record(model, geometry, q0, n, control):
+    """Step ``model`` n times from motor angles q0 (4,) at rest; at every step set ``d.ctrl = control(q, qd, k)``,
+    ``mj_forward`` and record AT that state: exact q, qd, MuJoCo's qdd, applied motor torques, nacelle pose
+    and acceleration, loop violation (max |efc_pos| of the equality rows); then ``mj_RungeKutta`` (RK4: the
+    ``qacc`` left by ``mj_step`` is a step average, not the sample's)."""
+    m, d = model, mujoco.MjData(model)
+    d.qpos[:] = geometry.qpos(q0, sim.forward_kinematics(geometry, q0))
+    mujoco.mj_forward(m, d)
+    out = {k: np.zeros((n, 4)) for k in ("q", "qd", "qdd", "tau", "x", "xdd")}
+    out["violation"] = np.zeros(n)
+    qm, dm, ne = geometry.qpos_motor, geometry.dof_motor, d.ne
+    nac = [m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)] for j in sim.model.NACELLE_JOINTS]
+    for k in range(n):
+        qa, va = d.qpos[qm], d.qvel[dm]
+        d.ctrl[:] = control(qa, va, k)
+        mujoco.mj_forward(m, d)
+        out["q"][k], out["qd"][k], out["x"][k] = qa, va, geometry.nacelle_pose(d.qpos)
+        out["qdd"][k] = d.qacc[dm]
+        out["tau"][k] = d.actuator_force
+        out["xdd"][k] = d.qacc[nac]
+        out["violation"][k] = np.abs(d.efc_pos[:ne]).max()
+        if m.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
+            mujoco.mj_RungeKutta(m, d, 4)
+        else:
+            mujoco.mj_Euler(m, d)
+    out["h"] = m.opt.timestep
+    return out
+
+
+def record_exact(model, geometry, seconds=2.0, seed=0):
+    """Track a smooth reference with a PD law (gain 200) and record every MuJoCo step (see ``_record``). The
+    reference: sums of sines of the nacelle pose around home, through the inverse kinematics (a joint-space
+    reference would spin the nacelle into a singularity)."""
+    h = model.opt.timestep
     n = int(round(seconds / h))
     t = np.arange(n) * h
     rng = np.random.default_rng(seed)
@@ -57,22 +78,20 @@ def record_exact(model, geometry, seconds=2.0, seed=0, timestep=None):
     x_ref = geometry.x_home + amp * (0.7 * np.sin(2 * np.pi * f1 * t[:, None] + p1)
                                      + 0.3 * np.sin(2 * np.pi * f2 * t[:, None] + p2))
     ref = sim.inverse_kinematics(geometry, x_ref)
-    out = {k: np.zeros((n, 4)) for k in ("q", "qd", "qdd", "tau", "x", "xdd")}
-    out["violation"] = np.zeros(n)
-    eq_rows = None
-    for k in range(n):
-        qa, va = d.qpos[geometry.qpos_motor], d.qvel[geometry.dof_motor]
-        d.ctrl[:] = np.clip(200.0 * (ref[k] - qa) - 10.0 * va, -15.0, 15.0)
-        out["q"][k], out["qd"][k], out["x"][k] = qa, va, geometry.nacelle_pose(d.qpos)
-        mujoco.mj_step(m, d)
-        out["qdd"][k] = d.qacc[geometry.dof_motor]
-        out["tau"][k] = d.actuator_force
-        out["xdd"][k] = d.qacc[geometry.qpos_nacelle]
-        if eq_rows is None:
-            eq_rows = d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-        out["violation"][k] = np.abs(d.efc_pos[d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY]).max()
-    out["h"] = h
-    return out
+    return _record(model, geometry, ref[0], n, lambda q, qd, k: np.clip(200.0 * (ref[k] - q) - 10.0 * qd, -15.0, 15.0))
+
+
+def record_aggressive(model, geometry, seconds=4.0, seed=0, gain=80.0, damping=2.0, amp=0.2, hz=(0.7, 1.6)):
+    """An aggressive joint motion: PD law ``gain (q_ref - q) - damping qd`` [N m/rad, N m s/rad] clipped at
+    +-15 N m towards ``amp sin(2 pi f t + p)`` per joint (f uniform in ``hz``, p uniform; the start is away
+    from the reference, so the torques saturate at first). Recorded at every MuJoCo step (``_record``)."""
+    h = model.opt.timestep
+    t = np.arange(int(round(seconds / h))) * h
+    rng = np.random.default_rng(seed)
+    f, p = rng.uniform(*hz, 4), rng.uniform(0, 2 * np.pi, 4)
+    ref = amp * np.sin(2 * np.pi * f * t[:, None] + p)
+    return _record(model, geometry, np.zeros(4), t.size,
+                   lambda q, qd, k: np.clip(gain * (ref[k] - q) - damping * qd, -15.0, 15.0))
 
 
 def friction_saturated(qd, qdd, h, band=0.005):

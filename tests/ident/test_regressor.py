@@ -3,13 +3,15 @@ evaluated by finite differences."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import mujoco
 import numpy as np
 import pytest
 
 import ident
 import sim
-from tests.conftest import friction_saturated, random_workspace_poses, record_exact
+from tests.conftest import friction_saturated, random_workspace_poses, record_aggressive, record_exact
 
 
 def test_parameter_order_and_shapes(geometry, exact_recording):
@@ -33,22 +35,51 @@ def test_regressor_equals_mujocos_motor_torques(model, geometry, exact_recording
     assert keep.mean() > 0.9
     tau = ident.inverse_dynamics(geometry, theta, r["q"], r["qd"], r["qdd"], x=r["x"], xdd=r["xdd"])
     err = np.abs(tau - r["tau"])[keep]
-    assert err.max() < 1e-6, err.max()
+    # the Newton solver's tolerance (option tolerance 1e-8) leaves ~1e-6 N m: measured 1.1e-6 here, 4e-8
+    # with tolerance 0 (models/README.md)
+    assert err.max() < 2e-6, err.max()
 
 
-def test_papers_kinematic_acceleration_leaves_only_a_soft_loop_residual(model, geometry):
-    """With xdd from eq. 19 (J qdd + Jd qd, what an identification sees) the residual is the integrator's
-    loop drift: small and O(h) (halving the timestep halves it)."""
-    theta = sim.true_parameters(model)
-    stats = []
-    for h in (5e-4, 2.5e-4):
-        r = record_exact(model, geometry, seconds=1.0, seed=1, timestep=h)
-        keep = friction_saturated(r["qd"], r["qdd"], r["h"])
-        err = np.abs(ident.inverse_dynamics(geometry, theta, r["q"], r["qd"], r["qdd"]) - r["tau"])[keep]
-        stats.append((np.median(err), err.max()))
-    (med1, max1), (med2, max2) = stats
-    assert med1 < 1e-3 and max1 < 3e-2  # documented in models/README.md
-    assert med2 < 0.65 * med1 and max2 < 0.75 * max1
+@pytest.mark.parametrize("seed", [0, 1, 3])
+def test_papers_kinematic_acceleration_matches_mujoco_under_aggressive_motion(model, geometry, seed):
+    """With xdd from eq. 19 (J qdd + Jd qd from MOTOR data only, the pose by forward kinematics of q: what an
+    identification sees) the paper's model gives MuJoCo's applied torques on exact states of an aggressive
+    joint motion (PD gain 80 N m/rad, torques clipped at +-15 N m, 0.2 rad sines at 0.7-1.6 Hz), where
+    cond(Jx) < 100 and friction is saturated. Oracle: MuJoCo's actuator forces at the sampled states."""
+    r = record_aggressive(model, geometry, seconds=4.0, seed=seed)
+    assert np.abs(r["tau"]).max() > 13.0  # [N m] near the +-15 N m limit (reached at the start)
+    assert r["violation"].max() < 1e-8  # [m] loop closure
+    ok = sim.singularity_measure(geometry, r["x"]) < 100.0
+    assert ok.mean() > 0.8
+    r = {k: v[ok] for k, v in r.items() if k != "h"} | {"h": r["h"]}
+    keep = friction_saturated(r["qd"], r["qdd"], r["h"])
+    x = sim.forward_kinematics(geometry, r["q"], x0=r["x"])  # from the motor angles (branch: MuJoCo's)
+    err = np.abs(ident.inverse_dynamics(geometry, sim.true_parameters(model), r["q"], r["qd"], r["qdd"], x=x)
+                 - r["tau"])[keep]
+    assert err.max() < 1e-3, err.max()
+    assert np.median(err) < 1e-5
+
+
+def test_papers_kinematic_acceleration_is_exact_on_the_paper_trajectory(model, geometry):
+    """The paper scenario's kind of exciting trajectory (trajectories.fourier_excitation, 10 s; its feasible
+    start, not optimised, to keep the test fast; the first 3 s) under the default controller: eq. 19 from the
+    exact motor states matches MuJoCo's applied torques to < 1e-5 N m where friction is saturated, and the
+    loops stay closed to < 1e-8 m. The optimised paper trajectory: tests/scenarios (slow) and the report's
+    error budget."""
+    import trajectories
+
+    ref = trajectories.fourier_excitation(geometry, duration=10.0, seed=0, optimise=False)
+    cut = ref.t < 3.0
+    ref = SimpleNamespace(t=ref.t[cut], q=ref.q[cut], qd=ref.qd[cut], qdd=ref.qdd[cut])
+    nominal = np.asarray(ident.NOMINAL_PARAMETERS)
+    _, controller = sim.default_controller(geometry, nominal)
+    ff = ident.inverse_dynamics(geometry, nominal, ref.q, ref.qd, ref.qdd)
+    _, truth = sim.simulate(model, ref, noise=sim.TorqueNoise(1.0), controller=controller, feedforward=ff)
+    assert truth.loop_violation.max() < 1e-8
+    keep = friction_saturated(truth.qd, truth.qdd, truth.h)
+    assert keep.mean() > 0.9
+    err = np.abs(ident.inverse_dynamics(geometry, truth.theta, truth.q, truth.qd, truth.qdd) - truth.tau_applied)
+    assert err[keep].max() < 1e-5, err[keep].max()
 
 
 def _euler_lagrange(kinetic, potential, q, qd, qdd, s=1e-4):
@@ -121,7 +152,7 @@ def test_arm_gravity_column_against_an_unbalanced_mujoco_arm(geometry, exact_rec
         body = spec.body(f"arm{i + 1}")
         body.ipos = [r_off, 0.0, 0.0]
         mxa.append(body.mass * r_off)
-    m = spec.compile()
+    m = sim.model.apply_solver_constants(spec.compile())
     theta = np.concatenate([sim.true_parameters(m), mxa, np.zeros(4)])
     r = record_exact(m, geometry, seconds=1.0, seed=4)
     keep = friction_saturated(r["qd"], r["qdd"], r["h"])

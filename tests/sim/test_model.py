@@ -40,7 +40,7 @@ def test_model_is_closed_at_qpos0_and_home(model):
             mujoco.mj_resetDataKeyframe(model, d, key)
         mujoco.mj_forward(model, d)
         eq = d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-        assert eq.sum() == 6  # 4 forearm lengths + 2 lateral-bar parallelism rows
+        assert eq.sum() == 14  # 4 rod-end connects (3 rows each) + 2 lateral-bar parallelism rows
         assert np.abs(d.efc_pos[eq]).max() < 1e-12
 
 
@@ -104,3 +104,39 @@ def test_load_model_rejects_a_non_h4(tmp_path):
     p.write_text('<mujoco><worldbody><body><joint name="q1"/><geom size="0.1"/></body></worldbody></mujoco>')
     with pytest.raises(sim.ModelError, match="must define joint"):
         sim.load_model(p)
+
+
+def _raw_model():
+    return mujoco.MjModel.from_xml_path(str(sim.DEFAULT_MODEL_PATH))  # compiled, solver constants not applied
+
+
+def test_inverse_weights_are_scaled_once_and_survive_set_const(model):
+    """sim.load_model scales the non-motor inverse weights by the model's numeric; re-applying (which re-runs
+    mj_setConst) gives the same values, and the sim.variants builders apply it too."""
+    raw = _raw_model()
+    i = mujoco.mj_name2id(raw, mujoco.mjtObj.mjOBJ_NUMERIC, "h4_invweight_scale")
+    scale = raw.numeric_data[raw.numeric_adr[i]]
+    motors = [raw.jnt_dofadr[mujoco.mj_name2id(raw, mujoco.mjtObj.mjOBJ_JOINT, n)] for n in sim.model.MOTOR_JOINTS]
+    others = np.setdiff1d(np.arange(raw.nv), motors)
+    np.testing.assert_array_equal(model.dof_invweight0[motors], raw.dof_invweight0[motors])
+    np.testing.assert_allclose(model.dof_invweight0[others], scale * raw.dof_invweight0[others], rtol=1e-12)
+    np.testing.assert_allclose(model.body_invweight0, scale * raw.body_invweight0, rtol=1e-12)
+    again = sim.apply_solver_constants(sim.load_model())
+    np.testing.assert_allclose(again.dof_invweight0, model.dof_invweight0, rtol=1e-12)
+    mujoco.mj_setConst(again, mujoco.MjData(again))  # MuJoCo's own recomputation drops the scaling ...
+    np.testing.assert_allclose(again.dof_invweight0, raw.dof_invweight0, rtol=1e-12)
+    sim.apply_solver_constants(again)  # ... which apply_solver_constants restores
+    np.testing.assert_allclose(again.dof_invweight0, model.dof_invweight0, rtol=1e-12)
+    for variant in (sim.randomised_model(3), sim.unbalanced_arms_model([0.01] * 4)[0],
+                    sim.broken_hypotheses_model(forearm_mass=0.2)[0]):
+        assert variant.body_invweight0[variant.nbody - 1].max() < 1e-3 * raw.body_invweight0[raw.nbody - 1].max()
+
+
+def test_rod_ends_meet_their_attachment_points_exactly_at_qpos0(model, geometry):
+    d = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, d)
+    for i in range(4):
+        end = d.site_xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"rod_end{i + 1}")]
+        a = d.site_xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"A{i + 1}")]
+        assert np.abs(end - a).max() < 1e-15
+    np.testing.assert_allclose(geometry.forearm_length, geometry.forearm_length[0], rtol=1e-15)
