@@ -32,7 +32,10 @@ optimiser the Coulomb columns use tanh(qd / 0.05 rad/s) for sign(qd). Constraint
 range, cond(Jx), speed, acceleration and nominal torque, each limit multiplied by ``design_factor`` on the
 coarse grid; SLSQP (scipy) with gradients by the chain rule through per-sample finite differences
 (:mod:`trajectories.design`). The start is a seeded random series (``np.random.default_rng(seed)``, amplitudes
-~ 1/k), scaled to 0.9 x its largest feasible amplitude. The result is checked on every sample
+~ 1/k), scaled to 0.9 x its largest feasible amplitude. With ``criterion="h"`` the objective is instead the bounded-error one of :mod:`trajectories.bounded` (smooth max
+of the relative half-widths h_j / target_j of the feasible set's geometry; Pronzato & Walter 1989), which
+rewards amplitude where cond(W) cannot see it; the grid then has at least 36 samples per second.
+The result is checked on every sample
 (:func:`trajectories.check_trajectory`) with the real limits and its amplitude reduced by 3 % steps if a peak
 fell between grid samples.
 """
