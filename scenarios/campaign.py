@@ -322,3 +322,24 @@ def campaign_spec(spec: dict, index: int) -> dict:
     shapes = spec["campaign"]["noise_shapes"]
     spec_i["noise"]["shape"] = shapes[index % len(shapes)]
     return spec_i
+
+
+def campaign_experiment(spec: dict, index: int, base_seed: int, estimate: bool = True):
+    """The experiment of run ``index``: seed ``base_seed + index`` (noise, randomised true parameters), the
+    index's noise shape, and the trajectory of seed ``base_seed + index % campaign.trajectories`` (one per run
+    when 0; a few designed trajectories shared by many runs keep campaigns fast, the design being cached).
+    Returns (ExperimentRun, noise shape)."""
+    from scenarios.experiment import make_reference, run_experiment
+
+    seed = base_seed + index
+    spec_i = campaign_spec(spec, index)
+    path = spec["model"] or None
+    spread = spec["campaign"]["parameter_spread"]
+    model = sim.randomised_model(seed, spread, path) if spread > 0 else sim.load_model(path)
+    n_traj = spec["campaign"]["trajectories"]
+    reference = None
+    if n_traj:
+        geometry = sim.H4Geometry.from_model(model)
+        reference = make_reference(spec_i, geometry, base_seed + index % n_traj)
+    run = run_experiment(spec_i, seed, model=model, model_path=path, reference=reference, estimate=estimate)
+    return run, spec_i["noise"]["shape"]

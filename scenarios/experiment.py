@@ -17,6 +17,7 @@ import sim
 from ident.filtering import ProcessingSettings
 from ident.processing import Equation, build_equation
 from scenarios.budget import error_budget
+from scenarios.explain import width_analysis
 
 
 @dataclass
@@ -44,6 +45,9 @@ class ExperimentRun:
     budget: dict = field(default_factory=dict)
     controller_report: str = ""
     timings: dict = field(default_factory=dict)
+    width_analysis: dict | None = None
+    noise_bound: float = 0.0
+    noise_description: dict = field(default_factory=dict)
 
     @property
     def residual(self) -> np.ndarray:
@@ -79,7 +83,7 @@ class ExperimentRun:
             "units": list(ident.parameter_units(self.spec["structure"]["regressor"])),
             "true": self.theta_true.tolist(),
             "bound": self.bound_raw,
-            "bound_parts": {"noise": self.spec["noise"]["bound"], "allowance": self.spec["bound"]["allowance"]},
+            "bound_parts": {"noise": self.noise_bound, "allowance": self.spec["bound"]["allowance"]},
             "bound_processed": float(eq.bound.max()),
             "filter_l1_norm": eq.info.get("l1_norm", 1.0),
             "min_consistent_bound": self.min_consistent_bound,
@@ -87,13 +91,15 @@ class ExperimentRun:
             "bound_covers_residual": bool(np.all(r <= eq.bound)),
             "rows": len(eq),
             "rows_raw": eq.info.get("rows_raw"),
-            "noise": self.spec["noise"],
+            "noise": {**self.spec["noise"], "bound": self.noise_bound, "description": self.noise_description},
             "prior": {"lower": self.prior.lower.tolist(), "upper": self.prior.upper.tolist()},
             "methods": methods,
             "budget": self.budget,
             "timings": self.timings,
             "duration": float(self.dataset.t[-1] - self.dataset.t[0]),
         }
+        if self.width_analysis is not None:
+            out["width_analysis"] = self.width_analysis
         if self.wls is not None:
             out["wls"] = {"theta": np.asarray(self.wls.theta).tolist(), "std": np.asarray(self.wls.std).tolist(),
                           "rel_std_percent": np.asarray(self.wls.rel_std_percent).tolist()}
@@ -101,14 +107,34 @@ class ExperimentRun:
 
 
 def make_reference(spec: dict, geometry, seed: int):
-    """The exciting trajectory of a spec (trajectories package), seeded."""
+    """The exciting trajectory of a spec (trajectories package), seeded: the legacy cond(W) design
+    (``trajectory.criterion = "cond"`` with the default limits) or :func:`trajectories.design_excitation`
+    (bounded-error criterion ``"h"`` or ``"cond"``, cached by its inputs) under ``trajectory.limits``."""
     import trajectories
 
     tr = spec["trajectory"]
     if tr["kind"] != "fourier":
         raise ValueError(f"trajectory.kind must be 'fourier', got {tr['kind']!r}")
-    return trajectories.fourier_excitation(geometry, duration=tr["duration"], harmonics=tr["harmonics"],
-                                           base_hz=tr["base_hz"], seed=seed, optimise=tr["optimise"])
+    if tr["criterion"] == "cond" and tr["limits"] == "default":
+        return trajectories.fourier_excitation(geometry, duration=tr["duration"], harmonics=tr["harmonics"],
+                                               base_hz=tr["base_hz"], seed=seed, optimise=tr["optimise"])
+    limits = trajectories.Limits.h4_class() if tr["limits"] == "h4_class" else trajectories.Limits()
+    return trajectories.design_excitation(geometry, duration=tr["duration"], seed=seed, limits=limits,
+                                          criterion=tr["criterion"], processing=dict(spec["processing"]),
+                                          harmonics=tr["harmonics"], base_hz=tr["base_hz"])
+
+
+def make_noise(spec: dict):
+    """The torque error a spec injects (``noise.shape``; see scenarios.spec.DEFAULTS): a sim.TorqueNoise or a
+    sim.noise.TorqueError, each with its rigorous ``bound`` [N m]."""
+    from sim.noise import TorqueError, realistic_drive
+
+    nz = spec["noise"]
+    if nz["shape"] == "realistic":
+        return realistic_drive(nz["bound"])
+    if nz["shape"] == "model":
+        return TorqueError.from_spec(nz["model"])
+    return sim.TorqueNoise(nz["bound"], nz["shape"] if nz["bound"] > 0 else "none", nz["frequency_hz"])
 
 
 def nominal_parameters() -> np.ndarray:
@@ -137,8 +163,7 @@ def run_experiment(spec: dict, seed: int | None = None, model=None, model_path: 
     design, controller = sim.default_controller(geometry, nominal, bandwidth_hz=spec["controller"]["bandwidth_hz"])
     ff = ident.inverse_dynamics(geometry, nominal, reference.q, reference.qd, reference.qdd) \
         if spec["controller"]["feedforward"] else None
-    nz = spec["noise"]
-    noise = sim.TorqueNoise(nz["bound"], nz["shape"] if nz["bound"] > 0 else "none", nz["frequency_hz"])
+    noise = make_noise(spec)
     dataset, truth = sim.simulate(
         model, reference, noise=noise, controller=controller, feedforward=ff, seed=seed,
         settings=sim.SimulationSettings(encoder_counts=spec["encoder"]["counts_per_turn"] or None),
@@ -151,13 +176,13 @@ def run_experiment(spec: dict, seed: int | None = None, model=None, model_path: 
     p = len(ident.parameter_names(structure))
     prior = ident.Box(np.full(p, spec["prior"]["lower"]), np.full(p, spec["prior"]["upper"]),
                       ident.parameter_names(structure))
-    bound_raw = spec["noise"]["bound"] + spec["bound"]["allowance"]
+    bound_raw = noise.bound + spec["bound"]["allowance"]
     equation = build_equation(geometry, dataset, bound_raw, settings, prior=prior, structure=structure)
     timings["processing"] = time.perf_counter() - t0
     run = ExperimentRun(spec=spec, seed=seed, model_path=path, model=model, geometry=geometry,
                         theta_true=theta_true, reference=reference, dataset=dataset, truth=truth, settings=settings,
                         equation=equation, prior=prior, bound_raw=bound_raw, controller_report=design.report(),
-                        timings=timings)
+                        timings=timings, noise_bound=float(noise.bound), noise_description=noise.describe())
     t0 = time.perf_counter()
     run.budget = error_budget(geometry, dataset, truth, settings, structure, theta=theta_true)
     timings["budget"] = time.perf_counter() - t0
@@ -183,6 +208,12 @@ def estimate_boxes(run: ExperimentRun) -> None:
         t0 = time.perf_counter()
         run.wls = ident.wls(eq.W, eq.y, joints=4, names=eq.names, joint_of_row=eq.joint)
         run.seconds["wls"] = time.perf_counter() - t0
+    if run.spec["estimators"]["explain"]:
+        t0 = time.perf_counter()
+        hull = run.boxes.get("hull")
+        run.width_analysis = width_analysis(eq.W, eq.y, eq.bound, run.theta_true, prior.lower, prior.upper,
+                                            list(eq.names), None if hull is None else hull.width)
+        run.seconds["width_analysis"] = time.perf_counter() - t0
 
 
 def estimate_hull(run: ExperimentRun) -> None:

@@ -92,6 +92,31 @@ def budget_table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def width_table(result: dict) -> str:
+    """Markdown: per parameter h_j, predicted width 2 (b - rho) h_j (and the upper 2 (b + rho) h_j), the hull's
+    width, its relative width and the ratio to the paper's Table 1 relative width."""
+    a = result.get("width_analysis")
+    if not a:
+        return "(no width analysis)"
+    lines = [f"Slack b - rho = {a['reference_bound']:.4g} - {a['rho']:.4g} = {a['slack']:.4g} N m "
+             "(reference bound minus oracle residual, rows scaled to the reference bound).", "",
+             "| parameter | h_j | predicted width 2(b-rho)h_j (prior-cut) | upper 2(b+rho)h_j | hull width | relative width | "
+             "paper relative width | ratio to paper |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for j, name in enumerate(result["parameters"]):
+        cells = [f"`{name}`", f"{a['h'][j]:.4g}", f"{a['predicted_width'][j]:.4g}", f"{a['predicted_width_upper'][j]:.4g}"]
+        if "width" in a:
+            ratio = a["ratio_to_paper"][j]
+            cells += [f"{a['width'][j]:.4g}", f"{a['relative_width'][j]:.3g}", f"{a['paper_relative_width'][j]:.3g}",
+                      f"{ratio:.3g}" + (" (tighter)" if ratio <= 1 else "")]
+        else:
+            cells += ["-"] * 4
+        lines.append("| " + " | ".join(cells) + " |")
+    if a.get("compared"):
+        lines += ["", f"Hull at most the paper's relative width on {a['at_most_paper']} of {a['compared']} parameters; "
+                  f"geometric mean of the ratios {a['geometric_mean_ratio']:.3g}."]
+    return "\n".join(lines)
+
+
 def summary_lines(result: dict) -> list[str]:
     lines = [
         f"- assumed bound on raw rows: {result['bound']:.4g} N m = injected noise {result['bound_parts']['noise']:.4g} "
@@ -124,6 +149,7 @@ def write_paper_report(result: dict, out: Path, extra: str = "") -> None:
         *summary_lines(result), "",
         "## Table 1: guaranteed boxes (prior [" + f"{result['prior']['lower'][0]}, {result['prior']['upper'][0]}])",
         "", table1(result), "", "## Table 2: weighted least squares", "", table2(result), "",
+        "## Why the boxes are this wide (slack x geometry)", "", width_table(result), "",
         "## Error budget (oracle residual split by source)", "", budget_table(result), "",
         "Plots: `boxes.png` (boxes against the truth).", "", extra,
     ])

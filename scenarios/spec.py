@@ -24,18 +24,24 @@ DEFAULTS: dict = {
     "description": "",
     "seed": 0,
     "model": "",  # empty: models/h4.xml
-    "trajectory": {"kind": "fourier", "duration": 10.0, "harmonics": 5, "base_hz": 0.5, "optimise": True},
+    # criterion: "cond" (cond(W diag theta_nominal), the legacy design) or "h" (bounded-error half-widths,
+    # trajectories.design_excitation, cached); limits: "default" (trajectories.Limits()) or "h4_class"
+    "trajectory": {"kind": "fourier", "duration": 10.0, "harmonics": 5, "base_hz": 0.5, "optimise": True,
+                   "criterion": "cond", "limits": "default"},
     "controller": {"bandwidth_hz": 15.0, "feedforward": True},
-    "noise": {"shape": "uniform", "bound": 1.0, "frequency_hz": 5.0},
+    # shape: uniform | square | sine | none (bound, frequency_hz), realistic (sim.noise.realistic_drive(bound)),
+    # model (the table noise.model, sim.noise.TorqueError.from_spec: its bound replaces noise.bound)
+    "noise": {"shape": "uniform", "bound": 1.0, "frequency_hz": 5.0, "model": {}},
     "encoder": {"counts_per_turn": 20000},
     "bound": {"allowance": 0.5},  # assumed raw-row bound = noise.bound + allowance [N m]
     "processing": {"position_cutoff_hz": 20.0, "butter_order": 4, "decimation": 10, "numtaps": 41,
                    "fir_cutoff": 0.8, "speed_threshold": 0.05},
     "prior": {"lower": 0.0, "upper": 2.0},
-    "estimators": {"methods": ["hull", "cgsp"], "wls": True},
+    "estimators": {"methods": ["hull", "cgsp"], "wls": True, "explain": True},
     "structure": {"regressor": "paper", "arm_com_offset": 0.0, "forearm_mass": 0.0},
+    # trajectories: number of distinct trajectories (run i uses seed base + i % trajectories); 0: one per run
     "campaign": {"runs": 200, "noise_shapes": ["uniform", "square", "sine"], "parameter_spread": 0.3,
-                 "workers": 0, "scheduler": ""},
+                 "workers": 0, "scheduler": "", "trajectories": 0},
     "sweep": {"factors": [0.5, 0.8, 0.9, 1.0, 1.1, 1.25, 1.5, 2.0, 3.0, 5.0]},
     "outliers": {"count": 5, "magnitude": 6.0, "relax": 8, "method": "auto"},
     # uncertain_regressor: the filter-distortion assumption is calibrated on a simulation with the same reference,
@@ -52,7 +58,7 @@ def _merge(base: dict, override: dict, where: str) -> dict:
     for key, value in override.items():
         if key not in base:
             raise ScenarioError(f"unknown key {where}{key!r} (known: {sorted(base)})")
-        if isinstance(base[key], dict) and key != "quick":
+        if isinstance(base[key], dict) and key not in ("quick", "model"):
             if not isinstance(value, dict):
                 raise ScenarioError(f"{where}{key} must be a table, got {type(value).__name__}")
             out[key] = _merge(base[key], value, f"{where}{key}.")
@@ -66,7 +72,9 @@ def _merge(base: dict, override: dict, where: str) -> dict:
 
 
 BOX_METHODS = ("hull", "cgsp")  # the set-membership methods of ident.estimate
-NOISE_SHAPES = ("uniform", "square", "sine", "none")  # the simulator's named shapes a spec can choose
+NOISE_SHAPES = ("uniform", "square", "sine", "none", "realistic", "model")  # see DEFAULTS["noise"]
+CRITERIA = ("cond", "h")
+LIMITS = ("default", "h4_class")
 
 
 def _check_list(value, where: str, allowed: tuple[str, ...], allow_empty: bool) -> None:
@@ -84,6 +92,13 @@ def _check_lists(spec: dict) -> None:
     _check_list(spec["campaign"]["noise_shapes"], "campaign.noise_shapes", NOISE_SHAPES, allow_empty=False)
     if spec["noise"]["shape"] not in NOISE_SHAPES:
         raise ScenarioError(f"noise.shape must be one of {NOISE_SHAPES}, got {spec['noise']['shape']!r}")
+    if spec["trajectory"]["criterion"] not in CRITERIA:
+        raise ScenarioError(f"trajectory.criterion must be one of {CRITERIA}, got {spec['trajectory']['criterion']!r}")
+    if spec["trajectory"]["limits"] not in LIMITS:
+        raise ScenarioError(f"trajectory.limits must be one of {LIMITS}, got {spec['trajectory']['limits']!r}")
+    n_traj = spec["campaign"]["trajectories"]
+    if isinstance(n_traj, bool) or not isinstance(n_traj, int) or n_traj < 0:
+        raise ScenarioError(f"campaign.trajectories must be an integer >= 0, got {n_traj!r}")
     factors = spec["sweep"]["factors"]
     if not isinstance(factors, list) or not factors or not all(
             isinstance(f, (int, float)) and not isinstance(f, bool) and f > 0 for f in factors):

@@ -7,29 +7,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
-import sim
 from scenarios import report
-from scenarios.campaign import campaign_spec, plot_relative_widths, run_many, summarise_methods
-from scenarios.experiment import run_experiment
+from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise_methods
 from scenarios.rundir import OwnedFolder, save_run_files, write_json
 from scenarios.spec import ScenarioError
 from sim.dataset import atomic_write_bytes
 
 DESCRIPTION = "Monte Carlo over seeds, noise shapes, trajectories and true parameters: is the truth always enclosed?"
 RESUMABLE = True
-
-
-def campaign_experiment(spec: dict, index: int, base_seed: int):
-    """The experiment of run ``index``: seed ``base_seed + index``, the index's noise shape, true parameters
-    randomised with that seed. Returns (ExperimentRun, noise shape)."""
-    seed = base_seed + index
-    spec_i = campaign_spec(spec, index)
-    path = spec["model"] or None
-    spread = spec["campaign"]["parameter_spread"]
-    model = sim.randomised_model(seed, spread, path) if spread > 0 else sim.load_model(path)
-    return run_experiment(spec_i, seed, model=model, model_path=path), spec_i["noise"]["shape"]
 
 
 def campaign_job(spec: dict, index: int, base_seed: int) -> dict:

@@ -22,7 +22,7 @@ def _sweep_bounds(run: ExperimentRun) -> np.ndarray:
     eq = run.equation
     m_star = run.min_consistent_bound
     l1 = eq.info.get("l1_norm", 1.0)
-    noise_level = max(run.spec["noise"]["bound"] * l1, m_star)
+    noise_level = max(run.noise_bound * l1, m_star)
     factors = np.asarray(run.spec["sweep"]["factors"], dtype=float)
     grid = np.concatenate([factors * noise_level, [m_star * 0.9, m_star * 1.0001, float(np.abs(run.residual).max()),
                                                    float(eq.bound.max())]])

@@ -1,0 +1,82 @@
+"""Kind ``enclosure_critical``: a campaign whose enclosure check can fail.
+
+Every processed row's bound is a rigorous upper bound, rounded outward, of that row's own oracle residual
+``|y_k - W_k theta_true|`` (interval evaluation of ``W_k theta_true``, :func:`ident.interval.point_matmul`), so
+the true parameters are feasible but touch many strips and the feasible set is tiny: the boxes are orders of
+magnitude narrower than in the ordinary campaign, and any unsound rounding in an estimator (a safe bound that is
+not safe, a scaling that is not exact, a fallback that shrinks) shows as a miss. The bounds are derived from the
+truth on purpose: this is a test of the estimators' rigour, not an identification.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from ident.interval import down, point_matmul, up
+from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise_methods
+from scenarios.experiment import estimate_boxes
+from scenarios.report import relative_width_table
+from scenarios.rundir import write_json
+from scenarios.spec import ScenarioError
+from sim.dataset import atomic_write_bytes
+
+DESCRIPTION = "row bounds = each row's own oracle residual, rounded outward: a tiny feasible set, misses show rigour bugs"
+RESUMABLE = True
+
+
+def critical_bounds(W, y, theta) -> np.ndarray:
+    """Per row a float ``b_k >= |y_k - W_k theta|`` in exact arithmetic (outward-rounded interval evaluation)."""
+    lo, hi = point_matmul(np.asarray(W, float), np.asarray(theta, float))
+    y = np.asarray(y, float)
+    r_lo, r_hi = down(y - hi), up(y - lo)
+    return np.maximum(np.abs(r_lo), np.abs(r_hi))
+
+
+def critical_job(spec: dict, index: int, base_seed: int) -> dict:
+    """One run: the ordinary experiment, then the estimators under the critical row bounds."""
+    run_, shape = campaign_experiment(spec, index, base_seed, estimate=False)
+    eq = run_.equation
+    bound = critical_bounds(eq.W, eq.y, run_.theta_true)
+    run_.equation = dataclasses.replace(eq, bound=bound)
+    estimate_boxes(run_)
+    result = run_.result()
+    result.update(index=index, noise_shape=shape, critical_bound_median=float(np.median(bound)),
+                  critical_bound_max=float(bound.max()))
+    return result
+
+
+def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fresh: bool = False) -> dict:
+    if only is not None:
+        raise ScenarioError("only is not available for enclosure-critical (rerun the ordinary campaign's index)")
+    runs, info = run_many(spec, seed, out, critical_job, progress, fresh=fresh)
+    first = runs[0]
+    result = {
+        "scenario": spec["name"], "kind": spec["kind"], "seed": seed, "quick": spec.get("quick_applied", False),
+        "model": first["model"], "parameters": first["parameters"], "true": first["true"],
+        "bound": "critical (per row: its own oracle residual, rounded outward)", "runs": len(runs),
+        "critical_bound_median": float(np.median([r["critical_bound_median"] for r in runs])),
+        "min_consistent_bound": float(max(r["min_consistent_bound"] for r in runs)),
+        "oracle_residual": float(max(r["oracle_residual"] for r in runs)),
+        "runs_bound_covers_residual": int(sum(r["bound_covers_residual"] for r in runs)),
+        "noise_shapes": spec["campaign"]["noise_shapes"], "parameter_spread": spec["campaign"]["parameter_spread"],
+        "methods": summarise_methods(runs), "campaign": info,
+    }
+    out = Path(out)
+    plot_relative_widths(result, runs, out / "widths.png")
+    lines = [f"# Scenario `{result['scenario']}`: critical bounds, a test of rigour", "",
+             f"- runs: {result['runs']}; every row's bound is its own oracle residual rounded outward (median "
+             f"{result['critical_bound_median']:.3g} N m); the truth is feasible in {result['runs_bound_covers_residual']} "
+             f"of {result['runs']} runs (must be all)"]
+    if info["runs_per_minute"]:
+        lines.append(f"- throughput: {info['runs_per_minute']:.3g} runs per minute ({info['computed']} runs in "
+                     f"{info['seconds']:.4g} s)")
+    for name, m in result["methods"].items():
+        lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']} (must be none: a miss is a rigour bug); "
+                     f"failed runs {m['failed_runs']}; median {m['seconds']:.3g} s")
+    lines += ["", "## Median relative width per parameter", "", relative_width_table(result), "", "Plot: `widths.png`."]
+    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
+    write_json(out / "result.json", result)
+    return result
