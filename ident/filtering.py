@@ -36,6 +36,8 @@ from typing import NamedTuple
 import numpy as np
 import scipy.signal
 
+from sim.validation import as_float_array, check_finite, joint_array, positive, positive_int
+
 __all__ = [
     "Derivatives",
     "FilteredEquation",
@@ -58,48 +60,8 @@ _TINY = 1e-300  # absolute slack for underflow: >= L * 2**-1074 for any realisti
 # ----------------------------------------------------------------------------------------------- validation
 
 
-def _as_float_array(x, name: str) -> np.ndarray:
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}") from exc
-    return arr
-
-
-def _check_finite(arr: np.ndarray, name: str) -> None:
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(arr))} non-finite entries")
-
-
-def _positive_float(x, name: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a real number, got {type(x).__name__}")
-    x = float(x)
-    if not (math.isfinite(x) and x > 0):
-        raise ValueError(f"{name} must be a finite number > 0, got {x}")
-    return x
-
-
-def _positive_int(x, name: str, minimum: int = 1) -> int:
-    if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {type(x).__name__}")
-    if x < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {x}")
-    return int(x)
-
-
-def _joint_positions(q, name: str = "q") -> np.ndarray:
-    q = _as_float_array(q, name)
-    if q.ndim != 2 or q.shape[1] != N_JOINTS:
-        raise ValueError(f"{name} must have shape (n, {N_JOINTS}), got {q.shape}")
-    _check_finite(q, name)
-    return q
-
-
 def _cutoff(cutoff_hz, dt: float, name: str = "cutoff_hz") -> float:
-    cutoff_hz = _positive_float(cutoff_hz, name)
+    cutoff_hz = positive(cutoff_hz, name)
     nyquist = 0.5 / dt
     if cutoff_hz >= nyquist:
         raise ValueError(f"{name} must be below the Nyquist frequency 1/(2 dt) = {nyquist:g} Hz, got {cutoff_hz:g}")
@@ -116,8 +78,8 @@ def default_edge_samples(dt: float, cutoff_hz: float) -> int:
     ~ ``0.42/fc``; after ``3/fc`` it is below 1e-3 of its peak. Used both as the padding length of
     :func:`lowpass_position` and (+2 for the difference stencils) as the trimmed edge of :func:`derivatives`.
     """
-    dt = _positive_float(dt, "dt")
-    cutoff_hz = _positive_float(cutoff_hz, "cutoff_hz")
+    dt = positive(dt, "dt")
+    cutoff_hz = positive(cutoff_hz, "cutoff_hz")
     return int(math.ceil(3.0 / (cutoff_hz * dt)))
 
 
@@ -135,17 +97,17 @@ def lowpass_position(q, dt: float, cutoff_hz: float, order: int = 4, padlen: int
 
     Returns (n, 4) filtered positions [rad].
     """
-    q = _joint_positions(q)
-    dt = _positive_float(dt, "dt")
+    q = joint_array(q)
+    dt = positive(dt, "dt")
     cutoff_hz = _cutoff(cutoff_hz, dt)
-    order = _positive_int(order, "order")
+    order = positive_int(order, "order")
     n = q.shape[0]
     if n < 2:
         raise ValueError(f"q must have at least 2 samples to be filtered, got {n}")
     if padlen is None:
         padlen = min(default_edge_samples(dt, cutoff_hz), n - 1)
     else:
-        padlen = _positive_int(padlen, "padlen", minimum=0)
+        padlen = positive_int(padlen, "padlen", minimum=0)
         if padlen >= n:
             raise ValueError(f"padlen must be < n = {n} (number of samples in q), got {padlen}")
     sos = scipy.signal.butter(order, cutoff_hz, btype="low", output="sos", fs=1.0 / dt)
@@ -160,8 +122,8 @@ def central_difference(x, dt: float) -> np.ndarray:
     (``edge_order=2``), so every output is O(dt^2) accurate, but the ends are noisier; callers usually drop
     them (see :func:`derivatives`). Returns an array of the same shape [x's unit / s].
     """
-    x = _as_float_array(x, "x")
-    dt = _positive_float(dt, "dt")
+    x = as_float_array(x, "x")
+    dt = positive(dt, "dt")
     if x.ndim == 0 or x.shape[0] < 3:
         raise ValueError(f"x must have at least 3 samples along axis 0, got shape {x.shape}")
     return np.gradient(x, dt, axis=0, edge_order=2)
@@ -175,8 +137,8 @@ def second_difference(x, dt: float) -> np.ndarray:
     5 samples). Ends: one-sided ``(2 x0 - 5 x1 + 4 x2 - x3) / dt^2`` (second-order). Returns the same shape
     [x's unit / s^2].
     """
-    x = _as_float_array(x, "x")
-    dt = _positive_float(dt, "dt")
+    x = as_float_array(x, "x")
+    dt = positive(dt, "dt")
     if x.ndim == 0 or x.shape[0] < 4:
         raise ValueError(f"x must have at least 4 samples along axis 0, got shape {x.shape}")
     out = np.empty_like(x)
@@ -209,14 +171,14 @@ def derivatives(q, dt: float, cutoff_hz: float, order: int = 4, trim: int | None
     All arrays keep length n (end samples use one-sided second-order differences) and ``valid =
     slice(trim, n - trim)`` says which samples to keep. Raises ValueError if nothing would remain.
     """
-    q = _joint_positions(q)
-    dt = _positive_float(dt, "dt")
+    q = joint_array(q)
+    dt = positive(dt, "dt")
     cutoff_hz = _cutoff(cutoff_hz, dt)
     n = q.shape[0]
     if trim is None:
         trim = default_edge_samples(dt, cutoff_hz) + 2
     else:
-        trim = _positive_int(trim, "trim", minimum=0)
+        trim = positive_int(trim, "trim", minimum=0)
     if n < 4 or n - 2 * trim < 1:
         raise ValueError(f"q must have more than 2*trim = {2 * trim} samples (and at least 4), got {n}")
     qf = lowpass_position(q, dt, cutoff_hz, order)
@@ -234,10 +196,10 @@ def decimation_fir(factor: int, numtaps: int | None = None, cutoff: float = 0.8,
     ``fs/(2 factor)`` (Gautier uses 0.8), in (0, 1]; window : any ``firwin`` window.
     Returns (numtaps,) taps. An odd count makes the delay an integer, ``(numtaps - 1)/2`` samples.
     """
-    factor = _positive_int(factor, "factor")
+    factor = positive_int(factor, "factor")
     if numtaps is None:
         numtaps = 20 * factor + 1
-    numtaps = _positive_int(numtaps, "numtaps")
+    numtaps = positive_int(numtaps, "numtaps")
     if numtaps % 2 == 0:
         raise ValueError(f"numtaps must be odd (integer delay), got {numtaps}")
     if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float, np.integer, np.floating)):
@@ -315,10 +277,10 @@ class FilteredEquation:
 
 
 def _theta_abs_max(theta_abs_max, p: int) -> np.ndarray:
-    t = _as_float_array(theta_abs_max, "theta_abs_max")
+    t = as_float_array(theta_abs_max, "theta_abs_max")
     if t.shape != (p,):
         raise ValueError(f"theta_abs_max must have shape ({p},), got {t.shape}")
-    _check_finite(t, "theta_abs_max")
+    check_finite(t, "theta_abs_max")
     if np.any(t < 0):
         raise ValueError("theta_abs_max must be >= 0 (max |theta_j| over the prior box)")
     return t
@@ -378,9 +340,9 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
     """
     if joints != N_JOINTS:
         raise ValueError(f"joints must be {N_JOINTS} (the H4 stacking), got {joints}")
-    factor = _positive_int(factor, "factor")
-    W = _as_float_array(W, "W")
-    y = _as_float_array(y, "y")
+    factor = positive_int(factor, "factor")
+    W = as_float_array(W, "W")
+    y = as_float_array(y, "y")
     if W.ndim != 2:
         raise ValueError(f"W must have shape (4n, p), got {W.shape}")
     rows, p = W.shape
@@ -388,23 +350,23 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
         raise ValueError(f"W must have 4n rows (4 joints per sample), got {rows}")
     if y.shape != (rows,):
         raise ValueError(f"y must have shape ({rows},) to match W, got {y.shape}")
-    _check_finite(W, "W")
-    _check_finite(y, "y")
-    b = _as_float_array(bound, "bound")
+    check_finite(W, "W")
+    check_finite(y, "y")
+    b = as_float_array(bound, "bound")
     if b.ndim == 0:
         b = np.full(rows, float(b))
     elif b.shape != (rows,):
         raise ValueError(f"bound must be a scalar or have shape ({rows},), got {b.shape}")
-    _check_finite(b, "bound")
+    check_finite(b, "bound")
     if np.any(b < 0):
         raise ValueError("bound must be >= 0")
     if taps is None:
         h = decimation_fir(factor, numtaps, cutoff)
     else:
-        h = _as_float_array(taps, "taps")
+        h = as_float_array(taps, "taps")
         if h.ndim != 1 or h.size == 0:
             raise ValueError(f"taps must be a non-empty 1-D array, got shape {h.shape}")
-        _check_finite(h, "taps")
+        check_finite(h, "taps")
     t_max = None if theta_abs_max is None else _theta_abs_max(theta_abs_max, p)
 
     n = rows // N_JOINTS
@@ -446,8 +408,8 @@ def exclude_low_speed(qd, threshold, whole_samples: bool = False) -> np.ndarray:
     sample as soon as one joint is slow (keeps samples complete, e.g. for per-sample diagnostics).
     Returns a (4n,) bool array aligned with the ``4*k + i`` stacking.
     """
-    qd = _joint_positions(qd, "qd")
-    thr = _as_float_array(threshold, "threshold")
+    qd = joint_array(qd, "qd")
+    thr = as_float_array(threshold, "threshold")
     if thr.ndim == 0:
         thr = np.full(N_JOINTS, float(thr))
     elif thr.shape != (N_JOINTS,):
@@ -491,10 +453,10 @@ class ProcessingSettings:
     speed_threshold: float = 0.05
 
     def __post_init__(self) -> None:
-        dt = _positive_float(self.dt, "dt")
+        dt = positive(self.dt, "dt")
         _cutoff(self.position_cutoff_hz, dt, "position_cutoff_hz")
-        _positive_int(self.butter_order, "butter_order")
-        _positive_int(self.decimation, "decimation")
+        positive_int(self.butter_order, "butter_order")
+        positive_int(self.decimation, "decimation")
         if isinstance(self.speed_threshold, bool) or not isinstance(self.speed_threshold, (int, float)):
             raise TypeError(f"speed_threshold must be a real number, got {type(self.speed_threshold).__name__}")
         if not (math.isfinite(self.speed_threshold) and self.speed_threshold >= 0):

@@ -1,0 +1,107 @@
+"""Argument validation shared by every package (sim imports nothing of ours, so ident, trajectories and scenarios
+can all use it without breaking the one-way imports).
+
+Each check raises a ``TypeError`` (wrong kind of value) or ``ValueError`` (wrong value) whose message names the
+argument, what was expected and what came, e.g. ``"q must have shape (n, 4), got (3,)"``; each returns the
+value converted (float, int or a float array).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+N_JOINTS = 4
+
+__all__ = ["as_float_array", "axis_array", "check_finite", "joint_array", "joint_vector", "positive",
+           "positive_int", "real"]
+
+
+def as_float_array(x, name: str) -> np.ndarray:
+    """``x`` as a float array; TypeError for strings, None and non-numeric values."""
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
+    try:
+        return np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}") from exc
+
+
+def check_finite(arr: np.ndarray, name: str) -> None:
+    """ValueError naming how many entries of ``arr`` are NaN or infinite."""
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(arr))} non-finite entries")
+
+
+def real(x, name: str) -> float:
+    """A finite real number (bool refused)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number, got {type(x).__name__}")
+    x = float(x)
+    if not math.isfinite(x):
+        raise ValueError(f"{name} must be finite, got {x}")
+    return x
+
+
+def positive(x, name: str) -> float:
+    """A finite real number > 0."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number, got {type(x).__name__}")
+    x = float(x)
+    if not (math.isfinite(x) and x > 0):
+        raise ValueError(f"{name} must be a finite number > 0, got {x}")
+    return x
+
+
+def positive_int(x, name: str, minimum: int = 1) -> int:
+    """An integer >= ``minimum`` (bool refused)."""
+    if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {type(x).__name__}")
+    if x < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {x}")
+    return int(x)
+
+
+def joint_array(x, name: str = "q") -> np.ndarray:
+    """A finite float array of shape (n, 4): one row per sample, one column per joint."""
+    arr = as_float_array(x, name)
+    if arr.ndim != 2 or arr.shape[1] != N_JOINTS:
+        raise ValueError(f"{name} must have shape (n, {N_JOINTS}), got {arr.shape}")
+    check_finite(arr, name)
+    return arr
+
+
+def joint_vector(x, name: str) -> np.ndarray:
+    """A finite float array of shape (4,)."""
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name} must be an array of shape ({N_JOINTS},), got {type(x).__name__}")
+    try:
+        arr = np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be an array of shape ({N_JOINTS},), got {type(x).__name__}") from exc
+    if arr.shape != (N_JOINTS,):
+        raise ValueError(f"{name} must have shape ({N_JOINTS},), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr}")
+    return arr
+
+
+def axis_array(x, name: str, *, allow_zero: bool) -> np.ndarray:
+    """A scalar (broadcast) or (4,) array, finite and > 0 (``>= 0`` with ``allow_zero``)."""
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name} must be a number or an array of shape ({N_JOINTS},), got {type(x).__name__}")
+    try:
+        arr = np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be a number or an array of shape ({N_JOINTS},), "
+                        f"got {type(x).__name__}") from exc
+    if arr.ndim == 0:
+        arr = np.full(N_JOINTS, float(arr))
+    if arr.shape != (N_JOINTS,):
+        raise ValueError(f"{name} must be a scalar or have shape ({N_JOINTS},), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr}")
+    if np.any(arr < 0) if allow_zero else np.any(arr <= 0):
+        raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {arr}")
+    return arr
