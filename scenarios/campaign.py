@@ -265,6 +265,15 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     return [runs[i] for i in range(n)], info
 
 
+def throughput_lines(info: dict) -> list[str]:
+    """The report's line on campaign throughput (none when every run was reused)."""
+    if not info["runs_per_minute"]:
+        return []
+    where = info["scheduler"] or f"{info['workers']} local worker(s)"
+    return [f"- throughput: {info['runs_per_minute']:.3g} runs per minute ({info['computed']} runs in "
+            f"{info['seconds']:.4g} s on {where})"]
+
+
 def summarise_methods(runs: list[dict]) -> dict:
     """Per method over the runs: misses (and those where the bound covered the residual), failed runs,
     median and p90 relative widths (width / |true|), median seconds."""

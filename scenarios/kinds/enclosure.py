@@ -8,7 +8,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from scenarios import report
-from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise_methods
+from scenarios.campaign import (campaign_experiment, plot_relative_widths, run_many, summarise_methods,
+                                throughput_lines)
 from scenarios.rundir import OwnedFolder, save_run_files, write_json
 from scenarios.spec import ScenarioError
 from sim.dataset import atomic_write_bytes
@@ -80,9 +81,7 @@ def write_report(result: dict, out: Path) -> None:
              f"+-{100 * result['parameter_spread']:.0f} %); reused from an earlier start: {info['reused']}",
              f"- bound covers the oracle residual in {result['runs_bound_covers_residual']} of {result['runs']} runs "
              f"(max oracle residual {result['oracle_residual']:.4g} N m)"]
-    if info["runs_per_minute"]:
-        lines.append(f"- throughput: {info['runs_per_minute']:.3g} runs per minute ({info['computed']} runs in "
-                     f"{info['seconds']:.4g} s on {info['scheduler'] or str(info['workers']) + ' local worker(s)'})")
+    lines += throughput_lines(info)
     for name, m in result["methods"].items():
         lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']}; misses where the bound covered the "
                      f"residual (must be none): {m['misses_with_bound_covering_residual']}; median {m['seconds']:.3g} s")

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from ident.interval import down, point_matmul, up
-from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise_methods
+from scenarios.campaign import (campaign_experiment, plot_relative_widths, run_many, summarise_methods,
+                                throughput_lines)
 from scenarios.experiment import estimate_boxes
 from scenarios.report import relative_width_table
 from scenarios.rundir import write_json
@@ -70,9 +71,7 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
              f"- runs: {result['runs']}; every row's bound is its own oracle residual rounded outward (median "
              f"{result['critical_bound_median']:.3g} N m); the truth is feasible in {result['runs_bound_covers_residual']} "
              f"of {result['runs']} runs (must be all)"]
-    if info["runs_per_minute"]:
-        lines.append(f"- throughput: {info['runs_per_minute']:.3g} runs per minute ({info['computed']} runs in "
-                     f"{info['seconds']:.4g} s)")
+    lines += throughput_lines(info)
     for name, m in result["methods"].items():
         lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']} (must be none: a miss is a rigour bug); "
                      f"failed runs {m['failed_runs']}; median {m['seconds']:.3g} s")
