@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.filtering import ProcessingSettings, derivatives, exclude_low_speed, parallel_filter
+from ident.filtering import (N_JOINTS, ProcessingSettings, default_edge_samples, derivatives, exclude_low_speed,
+                             parallel_filter)
 from ident.regressor import parameter_names, regressor
 
 
@@ -68,35 +69,136 @@ def raw_equation(geometry, q, tau, dt: float, settings: ProcessingSettings | Non
     return w, y, keep, samples, (qf, qd, qdd)
 
 
+class ProcessingError(ValueError):
+    """The data cannot give an equation: too short a log, or no row free of slow samples."""
+
+
+BLOCK_SAMPLES = 100_000  # samples per processing block: ~45 MB of raw regressor; logs up to this size are one block
+
+
+def _row_bounds(bound, n: int) -> np.ndarray:
+    """bound -> (4,) per joint or (4n,) per raw row; validated (finite, > 0)."""
+    b = np.asarray(bound, dtype=float) if not isinstance(bound, (str, bytes)) else None
+    if b is None or b.dtype.kind not in "fiu":
+        raise TypeError(f"bound must be a number or an array of numbers [N m], got {type(bound).__name__}")
+    if b.ndim == 0:
+        b = np.full(N_JOINTS, float(b))
+    if b.shape not in ((N_JOINTS,), (N_JOINTS * n,)):
+        raise ValueError(f"bound must be a scalar, one value per joint ({N_JOINTS},) or one per raw row "
+                         f"({N_JOINTS * n},) [N m], got shape {b.shape}")
+    bad = ~(np.isfinite(b) & (b > 0))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        where = f"joint {k + 1}" if b.size == N_JOINTS else f"raw row {k} (sample {k // N_JOINTS}, joint {k % N_JOINTS + 1})"
+        raise ValueError(f"bound must be finite and > 0 [N m] everywhere, got {b[k]!r} at {where}")
+    return b
+
+
+def _bounds_of(b: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """Raw-row bounds of samples start..stop-1 (rows 4*start .. 4*stop-1)."""
+    if b.size == N_JOINTS:
+        return np.tile(b, stop - start)
+    return b[N_JOINTS * start: N_JOINTS * stop]
+
+
+def _too_slow(kept_raw: int, total_raw: int, threshold: float) -> ProcessingError:
+    if kept_raw == 0:
+        return ProcessingError(
+            f"no sample of the log moves faster than the speed threshold {threshold:g} rad/s "
+            f"(processing.speed_threshold) on any joint: the robot must move during the log (a static log "
+            f"cannot identify the parameters)")
+    return ProcessingError(
+        f"no filter window is free of samples slower than the speed threshold {threshold:g} rad/s "
+        f"(processing.speed_threshold): only {kept_raw} of {total_raw} raw rows move fast enough, never over "
+        f"a whole window; the robot must move continuously during the log")
+
+
 def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None = None, prior=None,
-                   structure: str = "paper") -> Equation:
+                   structure: str = "paper", block_samples: int = BLOCK_SAMPLES) -> Equation:
     """The processed equation of a :class:`sim.Dataset` (t, q, tau) under a raw-row bound [N m].
 
-    bound : scalar, the claim ``|tau_measured - W_true theta| <= bound`` on every raw row (noise plus the
-    allowance for derivative and model errors); prior : Box or (lower, upper), used to fold the
-    floating-point error of filtering W into the bound (needed for rigour; omitted = not folded, flagged in
-    ``info``). settings.decimation == 1 with numtaps == 1 skips the parallel filter.
+    bound : the claim ``|tau_measured - W_true theta| <= bound`` on every raw row (noise plus the allowance
+    for derivative and model errors) [N m]: a scalar, one value per joint (4,), or one per raw row (4n,)
+    (row ``4k + i`` = sample k, joint i); prior : Box or (lower, upper), used to fold the floating-point error
+    of filtering W into the bound (needed for rigour; omitted = not folded, flagged in ``info``).
+    settings.decimation == 1 with numtaps == 1 skips the parallel filter.
+
+    Blocks. The record is processed in time blocks of about ``block_samples`` samples, so the peak memory is
+    the processed equation plus one block's temporaries (a log of at most ``block_samples`` samples is one
+    block, processed exactly as the whole record). A block is a run of consecutive decimated outputs; it
+    reads the samples their FIR windows cover plus ``margin = 4 * default_edge_samples + 2`` samples on each
+    side (clipped to the record), filters and differentiates them as a record, and discards the margins, so
+    every block edge is trimmed like (and further than) the record's edges. Consequences, each measured in
+    tests/scenarios/test_identify.py: the rows, samples, joints and y are those of the whole-record
+    processing (y bit for bit: the FIR sums the same terms in the same order); W differs only by the
+    Butterworth transient of the block edge at >= margin samples (about exp(-28) of the transient, relative
+    differences ~1e-13), i.e. within the derivative-estimation allowance the bound already carries; the bound
+    is propagated rigorously for each block's own W, y and raw bounds. Only a row whose joint speed lies
+    within that ~1e-13 of the threshold could be classed differently.
+    Raises ProcessingError (a ValueError) if the log is too short or no row moves fast enough.
     """
-    bound = float(bound)
-    if not (np.isfinite(bound) and bound > 0):
-        raise ValueError(f"bound must be a finite number > 0 [N m], got {bound!r}")
     dt = dataset.dt
     settings = settings or ProcessingSettings(dt=dt)
     if abs(settings.dt - dt) > 1e-9:
         raise ValueError(f"settings.dt must match the dataset's sample period {dt:g} s, got {settings.dt:g}")
+    if isinstance(block_samples, bool) or not isinstance(block_samples, (int, np.integer)) or block_samples < 1:
+        raise ValueError(f"block_samples must be an integer >= 1, got {block_samples!r}")
+    n = len(dataset)
+    b_raw = _row_bounds(bound, n)
     names = parameter_names(structure)
-    w, y, keep, samples, _ = raw_equation(geometry, dataset.q, dataset.tau, dt, settings, structure)
     t_abs = _prior_abs_max(prior, len(names))
     taps = settings.taps()
-    if settings.decimation == 1 and taps.size == 1:
-        rows = np.flatnonzero(keep)
-        return Equation(w[rows], y[rows], np.full(rows.size, bound), samples[rows // 4], rows % 4, names,
-                        {"l1_norm": 1.0, "rows_raw": keep.size, "rows_kept": rows.size, "filtered": False})
-    fe = parallel_filter(w, y, bound, settings.decimation, taps=taps, theta_abs_max=t_abs)
-    mask = fe.propagate_mask(keep)
-    rows = np.flatnonzero(mask)
-    return Equation(
-        fe.W[rows], fe.y[rows], fe.bound[rows], samples[fe.sample_index[rows // 4]], rows % 4, names,
-        {"l1_norm": fe.l1_norm, "rows_raw": keep.size, "rows_filtered": fe.y.size, "rows_kept": rows.size,
-         "filtered": True, "w_rounding_included": fe.w_rounding_included, "raw_bound": bound},
-    )
+    L = taps.size
+    factor = settings.decimation
+    edge = default_edge_samples(dt, settings.position_cutoff_hz)
+    trim = edge + 2  # as derivatives(): the record's edges
+    if n - 2 * trim < max(L, 1) or n < 4:
+        raise ProcessingError(
+            f"the log must have at least {2 * trim + L} samples (2 x {trim} trimmed at the ends for the position "
+            f"filter and differences, plus {L} for the parallel filter's window), got {n}")
+    filtered = not (factor == 1 and L == 1)
+    scalar = b_raw.size == N_JOINTS and np.all(b_raw == b_raw[0])
+    m = (n - 2 * trim - L) // factor + 1  # decimated outputs of the whole record
+    per_block = max(1, block_samples // factor)
+    margin = 4 * edge + 2
+    q, tau = dataset.q, dataset.tau
+    Ws, ys, bs, ss, js = [], [], [], [], []
+    l1 = 1.0
+    w_incl = True
+    kept_raw = 0
+    for k0 in range(0, m, per_block):
+        k1 = min(m, k0 + per_block)
+        a, b = trim + k0 * factor, trim + (k1 - 1) * factor + L  # samples whose rows the block's outputs use
+        c0, c1 = (0, n) if (k0 == 0 and k1 == m) else (max(0, a - margin), min(n, b + margin))
+        est = derivatives(q[c0:c1], dt, settings.position_cutoff_hz, settings.butter_order, trim=0)
+        sl = slice(a - c0, b - c0)
+        qd = est.qd[sl]
+        w = regressor(geometry, est.q[sl], qd, est.qdd[sl], structure=structure)
+        y = np.asarray(tau[a:b], dtype=float).reshape(-1)
+        keep = exclude_low_speed(qd, settings.speed_threshold)
+        own = (trim + k1 * factor if k1 < m else b) - a  # samples not shared with the next block
+        kept_raw += int(keep[:N_JOINTS * own].sum())
+        rb = _bounds_of(b_raw, a, b)
+        if not filtered:
+            rows = np.flatnonzero(keep)
+            Ws.append(w[rows]); ys.append(y[rows]); bs.append(rb[rows])
+            ss.append(a + rows // N_JOINTS); js.append(rows % N_JOINTS)
+            continue
+        fe = parallel_filter(w, y, float(rb[0]) if scalar else rb, factor, taps=taps, theta_abs_max=t_abs)
+        del w
+        rows = np.flatnonzero(fe.propagate_mask(keep))
+        Ws.append(fe.W[rows]); ys.append(fe.y[rows]); bs.append(fe.bound[rows])
+        ss.append(a + fe.sample_index[rows // N_JOINTS]); js.append(rows % N_JOINTS)
+        l1, w_incl = fe.l1_norm, fe.w_rounding_included
+        del fe
+    rows_kept = sum(x.size for x in ys)
+    if rows_kept == 0:
+        raise _too_slow(kept_raw, N_JOINTS * (n - 2 * trim), settings.speed_threshold)
+    W = Ws[0] if len(Ws) == 1 else np.concatenate(Ws)
+    Ws.clear()
+    info = {"l1_norm": l1, "rows_raw": N_JOINTS * (n - 2 * trim), "rows_kept": rows_kept, "filtered": filtered,
+            "blocks": len(ys), "block_samples": per_block * factor, "block_margin": margin}
+    if filtered:
+        info.update({"rows_filtered": N_JOINTS * m, "w_rounding_included": w_incl,
+                     "raw_bound": float(b_raw[0]) if scalar else {"min": float(b_raw.min()), "max": float(b_raw.max())}})
+    return Equation(W, np.concatenate(ys), np.concatenate(bs), np.concatenate(ss), np.concatenate(js), names, info)

@@ -59,35 +59,83 @@ def _fail(message: str) -> None:
     raise typer.Exit(2)
 
 
-def _print_summary(result: dict) -> None:
+def _num(x) -> str:
+    """A number in at most 9 characters, 4 significant digits: 0.06074, 12.35, 3.770e-4, 0."""
+    if x is None:
+        return "-"
+    x = float(x)
+    if x == 0 or 1e-2 <= abs(x) < 1e4:
+        return f"{x:.4g}"
+    mant, exp = f"{x:.3e}".split("e")
+    return f"{mant}e{int(exp)}"
+
+
+def _summary_tables(result: dict, width: int) -> list:
+    """The summary as rich Tables each fitting ``width`` columns: column groups (truth, each method's box,
+    WLS) are packed greedily into tables, each repeating the parameter column."""
+    from rich import box as rbox
+    from rich.measure import Measurement
     from rich.console import Console
     from rich.table import Table
 
-    console = Console(stderr=False)
-    table = Table(title=f"{result['scenario']} (seed {result['seed']})")
-    table.add_column("parameter")
-    table.add_column("true", justify="right")
-    methods = {k: v for k, v in result.get("methods", {}).items() if v.get("status") == "ok" and v.get("lower")}
-    for name in methods:
-        table.add_column(f"{name} box", justify="right")
-        table.add_column("in", justify="center")
-    if "wls" in result:
-        table.add_column("WLS", justify="right")
-        table.add_column("%sigma", justify="right")
+    names = result["parameters"]
     true = result.get("true")
-    for j, pname in enumerate(result["parameters"]):
-        row = [pname, "-" if true is None else f"{true[j]:.4g}"]
-        for m in methods.values():
-            row.append(f"[{m['lower'][j]:.4g}, {m['upper'][j]:.4g}]")
-            enc = m.get("enclosed")
-            row.append("-" if not enc else ("yes" if enc[j] else "[red]NO[/red]"))
-        if "wls" in result:
-            row += [f"{result['wls']['theta'][j]:.4g}", f"{result['wls']['rel_std_percent'][j]:.3g}"]
-        table.add_row(*row)
-    console.print(table)
-    for key in ("bound", "bound_processed", "oracle_residual", "min_consistent_bound"):
+    groups = []  # each: list of (header, cells)
+    if true is not None:
+        groups.append([("true", [_num(v) for v in true])])
+    methods = {k: v for k, v in result.get("methods", {}).items() if v.get("status") == "ok" and v.get("lower")}
+    for name, m in methods.items():
+        cols = [(f"{name} lower", [_num(v) for v in m["lower"]]), (f"{name} upper", [_num(v) for v in m["upper"]])]
+        enc = m.get("enclosed")
+        if enc:
+            cols.append(("in", ["yes" if e else "[red]NO[/red]" for e in enc]))
+        groups.append(cols)
+    if "wls" in result:
+        groups.append([("WLS", [_num(v) for v in result["wls"]["theta"]]),
+                       ("%sigma", [f"{v:.3g}" for v in result["wls"]["rel_std_percent"]])])
+
+    seed = result.get("seed")
+    title = result["scenario"] + (f" (seed {seed})" if seed is not None else "")
+    probe = Console(width=10_000, file=open(__import__("os").devnull, "w"))
+
+    def make(gs, first):
+        table = Table(title=title if first else None, box=rbox.SIMPLE_HEAD, pad_edge=False)
+        table.add_column("parameter")
+        for g in gs:
+            for header, _ in g:
+                table.add_column(header, justify="center" if header == "in" else "right", no_wrap=True)
+        for j, pname in enumerate(names):
+            table.add_row(pname, *[cells[j] for g in gs for _, cells in g])
+        return table
+
+    def fits(gs):
+        return Measurement.get(probe, probe.options, make(gs, False)).maximum <= width
+
+    tables, current = [], []
+    for g in groups:
+        if current and not fits(current + [g]):
+            tables.append(make(current, not tables))
+            current = []
+        current.append(g)
+    tables.append(make(current, not tables))
+    return tables
+
+
+def _print_summary(result: dict) -> None:
+    """The result as tables fitting the terminal's width (rich; ``COLUMNS`` forces it), then the bounds."""
+    from rich.console import Console
+
+    console = Console(stderr=False)
+    for table in _summary_tables(result, console.width):
+        console.print(table)
+    bound = result.get("bound")
+    if isinstance(bound, list):
+        console.print("bound per joint: " + ", ".join(_num(b) for b in bound) + " N m")
+    elif bound is not None:
+        console.print(f"bound: {_num(bound)} N m")
+    for key in ("bound_processed", "oracle_residual", "min_consistent_bound"):
         if result.get(key) is not None:
-            console.print(f"{key}: {result[key]:.4g} N m")
+            console.print(f"{key}: {_num(result[key])} N m")
     for name, m in result.get("methods", {}).items():
         if m.get("status") != "ok":
             console.print(f"[red]{name}: {m.get('message')}[/red]")
@@ -176,25 +224,45 @@ def scenarios() -> None:
 @app.command()
 def identify(
     file: Path = typer.Argument(..., help="CSV log: header t,q1..q4,tau1..tau4 (SI units)"),
-    bound: float = typer.Option(..., help="bound on |tau - W theta| for every raw sample [N m]"),
+    bound: str = typer.Option(..., help="bound on |tau - W theta| for every raw sample [N m]: one number, "
+                              "4 comma-separated numbers (joints 1..4) or a .toml/.csv file (README)"),
     method: str = typer.Option("hull", help="hull | cgsp | wls"),
-    prior_lower: float = typer.Option(0.0, help="prior lower bound of every parameter"),
-    prior_upper: float = typer.Option(2.0, help="prior upper bound of every parameter"),
+    prior: Optional[Path] = typer.Option(None, help="per-parameter prior: .toml ([Imot1] lower = .. upper = ..) "
+                                         "or .csv (name,lower,upper); unnamed parameters keep the pair below"),
+    prior_lower: str = typer.Option("0.0", help="prior lower bound of every parameter (not in --prior)"),
+    prior_upper: str = typer.Option("2.0", help="prior upper bound of every parameter (not in --prior)"),
     model: Optional[Path] = typer.Option(None, help="MJCF model giving the robot's geometry"),
     out: Optional[Path] = typer.Option(None, help="output folder (default runs/identify-<file stem>)"),
-    as_json: bool = typer.Option(False, "--json", help="print result.json"),
+    as_json: bool = typer.Option(False, "--json", help="print result.json (the only output on stdout)"),
 ) -> None:
-    """The estimators on a user's own data; prints the table and writes result.json."""
-    from scenarios.identify import identify_csv
+    """The estimators on a user's own data; prints the table (or result.json) and writes result.json.
+
+    Exit codes: 0 done; 2 bad option, file or data (one error line on stderr); 3 the data are proven
+    inconsistent with the bound (result.json is still written, with the smallest consistent bound).
+    """
+    from scenarios.identify import (EXIT_INCONSISTENT, METHODS, OptionError, identify_csv, load_prior, parse_bound,
+                                    parse_number)
 
     try:
-        result = identify_csv(file, bound, method=method, prior=(prior_lower, prior_upper), model=model, out=out)
-    except ValueError as exc:
+        if method not in METHODS:
+            raise OptionError(f"--method must be one of {' | '.join(METHODS)}, got {method!r}")
+        bounds = parse_bound(bound)
+        lo, hi = parse_number(prior_lower, "--prior-lower"), parse_number(prior_upper, "--prior-upper")
+        if not lo < hi:
+            raise OptionError(f"--prior-lower must be < --prior-upper, got {lo:g} and {hi:g}")
+        box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
+        result = identify_csv(file, bounds, method=method, prior=box, model=model, out=out)
+    except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))
     if as_json:
         typer.echo(json.dumps(result, indent=2, default=str))
     else:
         _print_summary(result)
+    if result.get("consistent") is False:
+        failed = next(m for m in result["methods"].values() if m.get("status") != "ok")
+        typer.secho(f"error: the data are inconsistent with the bound (proven); the smallest consistent bound "
+                    f"is {failed['min_bound']:.6g} N m", fg=typer.colors.RED, err=True)
+        raise typer.Exit(EXIT_INCONSISTENT)
 
 
 @app.command()

@@ -1,8 +1,26 @@
-"""``h4bench identify``: the estimators on a user's own log (CSV), with the same result.json as a scenario."""
+"""``h4bench identify``: the estimators on a user's own log (CSV), with the same result.json as a scenario.
+
+Inputs a user with a datasheet has (formats documented in README.md, "identify: priors and bounds"):
+
+- the bound on ``|tau - W theta|`` for every raw sample [N m]: one number for all joints, four numbers
+  ``b1,b2,b3,b4`` (one per joint), or a file: TOML ``joint1 = 1.2`` ... ``joint4 = 1.0``, or CSV with the header
+  ``joint,bound`` and one row per joint (1..4);
+- the prior box: one pair ``(lower, upper)`` for all 14 parameters, or a file naming parameters (paper eq. 18
+  order ``Imot1..4, Mnac, Ibc, Fv1..4, Fs1..4``): TOML ``[Imot1]`` with ``lower = 0.0`` and ``upper = 0.05``, or
+  CSV with the header ``name,lower,upper``; parameters the file does not name keep the default pair.
+
+Option errors are :class:`OptionError` (a ValueError) whose message names the command-line option (or the file
+and the parameter or joint), what was expected and what came. Data proven inconsistent with the bound are
+recorded in result.json (``consistent: false``, the smallest consistent bound) and the command exits 3.
+"""
 
 from __future__ import annotations
 
+import csv
+import math
+import os
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -10,37 +28,197 @@ import numpy as np
 import ident
 import sim
 from ident.filtering import ProcessingSettings
-from ident.processing import build_equation
+from ident.processing import BLOCK_SAMPLES, build_equation
 from scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 from scenarios.spec import DEFAULTS
 
 METHODS = ("hull", "cgsp", "wls")
+N_JOINTS = 4
+EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (InconsistentDataError)
 
 
-def identify_csv(path, bound: float, method: str = "hull", prior=(0.0, 2.0), model=None, out=None) -> dict:
-    """Identify the 14 parameters from a CSV log under the raw-row bound ``bound`` [N m]."""
+class OptionError(ValueError):
+    """A bad command-line option value or option file; the message names the option or the file."""
+
+
+# ------------------------------------------------------------------------------------------- option values
+
+
+def parse_number(text, option: str, *, positive: bool = False) -> float:
+    """A finite number (``> 0`` if ``positive``) from an option's text; OptionError names ``option``."""
+    expected = "a finite number > 0" if positive else "a finite number"
+    try:
+        x = float(text)
+    except (TypeError, ValueError):
+        raise OptionError(f"{option} must be {expected}, got {text!r}") from None
+    if not math.isfinite(x) or (positive and not x > 0):
+        raise OptionError(f"{option} must be {expected}, got {text!r}")
+    return x
+
+
+def _read_table(path: Path, option: str, columns: tuple[str, ...]) -> list[tuple[int, dict]]:
+    """TOML -> [(0, {key: value})] or CSV with the header ``columns`` -> [(line, row dict)]."""
+    if not path.is_file():
+        raise OptionError(f"{option} must name an existing .toml or .csv file, got {str(path)!r} (not found)")
+    if path.suffix.lower() == ".toml":
+        try:
+            with path.open("rb") as fh:
+                return [(0, tomllib.load(fh))]
+        except tomllib.TOMLDecodeError as exc:
+            raise OptionError(f"{option} file {str(path)!r} is not valid TOML: {exc}") from None
+    if path.suffix.lower() != ".csv":
+        raise OptionError(f"{option} file must end in .toml or .csv, got {str(path)!r}")
+    with path.open(newline="") as fh:
+        rows = [r for r in csv.reader(fh) if r and any(f.strip() for f in r)]
+    header = [h.strip() for h in rows[0]] if rows else []
+    if header != list(columns):
+        raise OptionError(f"{option} file {str(path)!r} must have the CSV header {','.join(columns)}, got "
+                          f"{','.join(header) or 'an empty file'}")
+    out = []
+    for line, r in enumerate(rows[1:], start=2):
+        if len(r) != len(columns):
+            raise OptionError(f"{option} file {str(path)!r} line {line} must have {len(columns)} values "
+                              f"({','.join(columns)}), got {len(r)}")
+        out.append((line, dict(zip(columns, (f.strip() for f in r)))))
+    return out
+
+
+def parse_bound(text) -> np.ndarray:
+    """``--bound``: ``1.5``, ``1.2,1.5,1.5,1.0`` (joints 1..4) or a .toml/.csv file -> (4,) [N m], each > 0."""
+    text = str(text).strip()
+    if text.lower().endswith((".toml", ".csv")) or os.sep in text:
+        return _bound_file(Path(text))
+    parts = text.split(",")
+    if len(parts) == 1:
+        try:
+            return np.full(N_JOINTS, parse_number(text, "--bound", positive=True))
+        except OptionError:
+            raise OptionError(f"--bound must be a finite number > 0 [N m], {N_JOINTS} comma-separated numbers "
+                              f"(joints 1..{N_JOINTS}) or a .toml/.csv file, got {text!r}") from None
+    if len(parts) != N_JOINTS:
+        raise OptionError(f"--bound must be one number, {N_JOINTS} comma-separated numbers (joints 1..{N_JOINTS}) "
+                          f"or a .toml/.csv file, got {text!r} ({len(parts)} values)")
+    return np.array([parse_number(p.strip(), f"--bound (joint {i + 1})", positive=True) for i, p in enumerate(parts)])
+
+
+def _bound_file(path: Path) -> np.ndarray:
+    option = "--bound"
+    out = np.full(N_JOINTS, np.nan)
+    for line, row in _read_table(path, option, ("joint", "bound")):
+        where = f"{option} file {str(path)!r}" + (f" line {line}" if line else "")
+        items = row.items() if not line else [(f"joint{row['joint'].removeprefix('joint')}", row["bound"])]
+        for key, value in items:
+            joints = {f"joint{i + 1}": i for i in range(N_JOINTS)}
+            if key not in joints:
+                raise OptionError(f"{where}: the joint must be one of {list(joints)} (or 1..{N_JOINTS} in CSV), "
+                                  f"got {key!r}")
+            if isinstance(value, bool) or isinstance(value, dict):
+                raise OptionError(f"{where}: {key} must be a finite number > 0 [N m], got {value!r}")
+            j = joints[key]
+            if not np.isnan(out[j]):
+                raise OptionError(f"{where}: {key} is given twice")
+            out[j] = parse_number(value, f"{where}: {key}", positive=True)
+    missing = [f"joint{i + 1}" for i in range(N_JOINTS) if np.isnan(out[i])]
+    if missing:
+        raise OptionError(f"{option} file {str(path)!r} must give a bound for every joint, missing {missing}")
+    return out
+
+
+def load_prior(path, lower: float = 0.0, upper: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """``--prior FILE`` -> (lower (14,), upper (14,)): the file's parameters, the others ``[lower, upper]``."""
+    option = "--prior"
+    path = Path(path)
+    names = list(ident.PARAMETER_NAMES)
+    lo, hi = np.full(len(names), float(lower)), np.full(len(names), float(upper))
+    seen = set()
+    for line, row in _read_table(path, option, ("name", "lower", "upper")):
+        where = f"{option} file {str(path)!r}" + (f" line {line}" if line else "")
+        items = row.items() if not line else [(row["name"], {"lower": row["lower"], "upper": row["upper"]})]
+        for name, entry in items:
+            if name not in names:
+                raise OptionError(f"{where}: the parameter must be one of {names}, got {name!r}")
+            if name in seen:
+                raise OptionError(f"{where}: parameter {name} is given twice")
+            if not isinstance(entry, dict) or set(entry) != {"lower", "upper"}:
+                got = sorted(entry) if isinstance(entry, dict) else repr(entry)
+                raise OptionError(f"{where}: parameter {name} must have exactly the keys lower and upper, got {got}")
+            j = names.index(name)
+            for key in ("lower", "upper"):
+                if isinstance(entry[key], bool):
+                    raise OptionError(f"{where}: {name}.{key} must be a finite number, got {entry[key]!r}")
+            lo[j] = parse_number(entry["lower"], f"{where}: {name}.lower")
+            hi[j] = parse_number(entry["upper"], f"{where}: {name}.upper")
+            if not lo[j] < hi[j]:
+                raise OptionError(f"{where}: parameter {name} must have lower < upper, got lower = {lo[j]:g}, "
+                                  f"upper = {hi[j]:g}")
+            seen.add(name)
+    return lo, hi
+
+
+def _prior_box(prior) -> "ident.Box":
+    """(lower, upper) scalars, (lower (14,), upper (14,)) or a Box -> a validated Box."""
+    lower, upper = (prior.lower, prior.upper) if hasattr(prior, "lower") else prior
+    p = len(ident.PARAMETER_NAMES)
+    try:
+        lo = np.broadcast_to(np.asarray(lower, dtype=float), (p,)).copy()
+        hi = np.broadcast_to(np.asarray(upper, dtype=float), (p,)).copy()
+    except (TypeError, ValueError):
+        raise ValueError(f"prior must be (lower, upper) with numbers or {p} values each, got {prior!r}") from None
+    for j, name in enumerate(ident.PARAMETER_NAMES):
+        if not (math.isfinite(lo[j]) and math.isfinite(hi[j])):
+            raise ValueError(f"prior of {name} must be finite, got [{lo[j]}, {hi[j]}]")
+        if not lo[j] < hi[j]:
+            raise ValueError(f"prior of {name} must have lower < upper, got [{lo[j]:g}, {hi[j]:g}]")
+    return ident.Box(lo, hi)
+
+
+def _joint_bounds(bound) -> np.ndarray:
+    b = np.asarray(bound, dtype=float)
+    if b.ndim == 0:
+        b = np.full(N_JOINTS, float(b))
+    if b.shape != (N_JOINTS,):
+        raise ValueError(f"bound must be a number or {N_JOINTS} numbers (one per joint) [N m], got shape {b.shape}")
+    for i, v in enumerate(b):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"bound of joint {i + 1} must be a finite number > 0 [N m], got {v!r}")
+    return b
+
+
+# ------------------------------------------------------------------------------------------------ identify
+
+
+def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None, out=None,
+                 block_samples: int = BLOCK_SAMPLES) -> dict:
+    """Identify the 14 parameters from a CSV log and write ``result.json`` in ``out``.
+
+    bound : raw-row bound [N m], one number or (4,) per joint; prior : (lower, upper) numbers, (14,) arrays
+    each, or a Box; block_samples : processing block length (:func:`ident.processing.build_equation`).
+    Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
+    (the method's status ``failed`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
+    """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    if not (np.isfinite(bound) and bound > 0):
-        raise ValueError(f"bound must be a finite number > 0 [N m], got {bound!r}")
-    lo, hi = prior
-    if not lo < hi:
-        raise ValueError(f"prior lower must be < upper, got ({lo}, {hi})")
+    b = _joint_bounds(bound)
+    box_prior = _prior_box(prior)
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
     dataset = sim.Dataset.from_csv(path)
     geometry = sim.H4Geometry.from_model(sim.load_model(model))
     settings = ProcessingSettings(dt=dataset.dt, **DEFAULTS["processing"])
-    box_prior = ident.Box(np.full(14, lo), np.full(14, hi))
-    eq = build_equation(geometry, dataset, bound, settings, prior=box_prior)
+    eq = build_equation(geometry, dataset, b, settings, prior=box_prior, block_samples=block_samples)
+    samples = len(dataset)
+    del dataset
+    uniform = bool(np.all(b == b[0]))
     result = {
         "scenario": f"identify-{Path(path).stem}", "kind": "identify", "seed": None, "model": str(model or sim.DEFAULT_MODEL_PATH),
-        "source": str(path), "parameters": list(ident.PARAMETER_NAMES), "true": None, "bound": bound,
-        "bound_processed": float(eq.bound.max()), "rows": len(eq), "oracle_residual": None,
+        "source": str(path), "samples": samples, "parameters": list(ident.PARAMETER_NAMES), "true": None,
+        "bound": float(b[0]) if uniform else b.tolist(), "bound_processed": float(eq.bound.max()), "rows": len(eq),
+        "processing": {k: v for k, v in eq.info.items() if k in ("blocks", "block_samples", "block_margin", "l1_norm")},
+        "oracle_residual": None, "consistent": None,
         "prior": {"lower": box_prior.lower.tolist(), "upper": box_prior.upper.tolist()}, "methods": {},
     }
     result["min_consistent_bound"] = float(ident.min_consistent_bound(eq.W, eq.y, box_prior))
     if method == "wls":
-        w = ident.wls(eq.W, eq.y, joints=4, names=eq.names, joint_of_row=eq.joint)
+        w = ident.wls(eq.W, eq.y, joints=N_JOINTS, names=eq.names, joint_of_row=eq.joint)
         result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
                          "rel_std_percent": np.asarray(w.rel_std_percent).tolist()}
     else:
@@ -50,8 +228,12 @@ def identify_csv(path, bound: float, method: str = "hull", prior=(0.0, 2.0), mod
             result["methods"][method] = {"status": "ok", "lower": box.lower.tolist(), "upper": box.upper.tolist(),
                                          "enclosed": None, "width": box.width.tolist(),
                                          "seconds": time.perf_counter() - t0}
+            result["consistent"] = True
         except ident.InconsistentDataError as exc:
-            result["methods"][method] = {"status": "failed", "message": str(exc), "seconds": time.perf_counter() - t0}
+            result["methods"][method] = {"status": "failed", "error": "InconsistentDataError", "message": str(exc),
+                                         "min_bound": exc.min_bound, "scale_lower": exc.scale_lower,
+                                         "seconds": time.perf_counter() - t0}
+            result["consistent"] = False
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         write_json(tmp / "result.json", result)
     return result

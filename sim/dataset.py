@@ -139,31 +139,11 @@ class Dataset:
     @classmethod
     def from_csv(cls, path, delimiter: str = ",") -> "Dataset":
         """Import a robot log with a header row and columns ``t, q1..q4, tau1..tau4`` (SI units; extra
-        columns are ignored). Errors name the file, the column or the sample."""
-        path = Path(path)
-        if not path.is_file():
-            raise DatasetError(f"path must be an existing CSV file, got {str(path)!r} (not found)")
-        with path.open() as fh:
-            header = [h.strip() for h in fh.readline().strip().split(delimiter)]
-        needed = ["t"] + [f"q{i}" for i in range(1, 5)] + [f"tau{i}" for i in range(1, 5)]
-        missing = [c for c in needed if c not in header]
-        if missing:
-            raise DatasetError(f"CSV {str(path)!r} must have columns {needed}, missing {missing} (header: {header})")
-        try:
-            data = np.genfromtxt(path, delimiter=delimiter, skip_header=1, dtype=float, ndmin=2)
-        except ValueError as exc:
-            raise DatasetError(f"CSV {str(path)!r} has rows of unequal length or non-numeric values: {exc}") from exc
-        if data.ndim != 2 or data.shape[1] != len(header):
-            raise DatasetError(f"CSV {str(path)!r} rows must have {len(header)} values, got shape {data.shape}")
-        col = {c: header.index(c) for c in needed}
-        t = data[:, col["t"]]
-        q = data[:, [col[f"q{i}"] for i in range(1, 5)]]
-        tau = data[:, [col[f"tau{i}"] for i in range(1, 5)]]
-        for name, arr in (("t", t[:, None]), ("q", q), ("tau", tau)):
-            bad = ~np.all(np.isfinite(arr), axis=1)
-            if bad.any():
-                k = int(np.flatnonzero(bad)[0])
-                raise DatasetError(f"CSV {str(path)!r}: column {name} has NaN/empty value at data row {k + 1}")
+        columns are ignored), in bounded memory (:func:`sim.csvlog.read_log`). Errors name the file, the
+        column or the sample."""
+        from sim.csvlog import read_log
+
+        t, q, tau = read_log(path, delimiter)
         return cls(t, q, tau, {"source": "csv", "path": str(path)})
 
 
