@@ -315,8 +315,8 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
                 info["nearly_inconsistent"] = False
             else:
                 check_consistency_by_lp()
-        if res.info["lp_failures"]:
-            failed = sorted({names[j % p] for j in res.info["lp_failures"]})
+        if res.info["lp_failures"] or "lp_error" in res.info:
+            failed = sorted({names[j % p] for j in res.info["lp_failures"]}) or "some parameters"
             fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
                      "their endpoints are coarser safe bounds or the prior's")
         lower, upper = res.lower, res.upper
