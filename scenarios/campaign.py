@@ -45,6 +45,14 @@ class CampaignMismatchError(ScenarioError):
     """The output folder holds a campaign computed from other inputs."""
 
 
+class CampaignRunError(ScenarioError):
+    """Some runs of a campaign raised; ``errors`` maps their index to the message. The others are saved."""
+
+    def __init__(self, message: str, errors: dict[int, str]):
+        super().__init__(message)
+        self.errors = errors
+
+
 class CampaignInterrupted(ScenarioError):
     """The campaign was stopped (Ctrl-C, SIGTERM); finished runs are saved and it can be resumed."""
 
@@ -228,6 +236,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     todo = [i for i in range(n) if i not in runs]
     progress(f"campaign (reused {reused})" if reused else "campaign", reused, n)
     started = time.perf_counter()
+    errors: dict[int, str] = {}
     if todo:
         executor, client = _executor(camp)
         futures = {}
@@ -237,11 +246,15 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                 futures = {executor.submit(job, spec, i, seed): i for i in todo}
                 for fut in concurrent.futures.as_completed(futures):
                     i = futures[fut]
-                    result = fut.result()
+                    try:
+                        result = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - a run that crashed is reported, not hidden
+                        errors[i] = f"{type(exc).__name__}: {exc}"
+                        continue
                     result["provenance"] = prov
                     write_json(run_path(out, i), result)
                     runs[i] = result
-                    progress(f"campaign (reused {reused})" if reused else "campaign", len(runs), n)
+                    progress(f"campaign (reused {reused})" if reused else "campaign", len(runs) + len(errors), n)
         except KeyboardInterrupt:
             interrupted = True
             for fut in futures:
@@ -257,6 +270,12 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
             elif not interrupted:
                 executor.shutdown(wait=True, cancel_futures=True)
     seconds = time.perf_counter() - started
+    if errors:
+        first = min(errors)
+        raise CampaignRunError(
+            f"{len(errors)} of {n} runs crashed (not saved; the {len(runs)} others are saved in {str(out)!r} and a "
+            f"restart reuses them): run {first} (seed {seed + first}): {errors[first]}. Re-run it alone with --only "
+            f"{first} to inspect it", errors)
     computed = len(todo)
     info = {"reused": reused, "computed": computed, "seconds": seconds,
             "runs_per_minute": 60.0 * computed / seconds if computed and seconds > 0 else None,

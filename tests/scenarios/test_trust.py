@@ -238,3 +238,19 @@ def test_json_output_is_one_json_document(tmp_path):
     assert res.returncode == 0, res.stderr
     result = json.loads(res.stdout)
     assert result["scenario"] == "paper" and result["methods"]["hull"]["status"] == "ok"
+
+
+def crashing_job(spec: dict, index: int, base_seed: int) -> dict:
+    if index == 2:
+        raise FloatingPointError("the simulation diverged")
+    return fake_job(spec, index, base_seed)
+
+
+def test_a_crashing_run_is_reported_and_the_others_are_kept(tmp_path):
+    out = tmp_path / "c"
+    with pytest.raises(camp.CampaignRunError, match=r"1 of 4 runs crashed.*run 2 \(seed 1002\).*diverged.*--only 2") as err:
+        camp.run_many(_spec(), 1000, out, crashing_job, lambda *a: None)
+    assert set(err.value.errors) == {2}
+    assert sorted(p.name for p in (out / "runs").iterdir()) == ["0000.json", "0001.json", "0003.json"]
+    runs, info = camp.run_many(_spec(), 1000, out, fake_job, lambda *a: None)  # fixed: only the crashed run reruns
+    assert info["reused"] == 3 and info["computed"] == 1
