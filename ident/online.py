@@ -144,7 +144,9 @@ class OnlineHull:
             h = _new_highs(self.lp_tol)
             check(h.setOptionValue("simplex_strategy", 1), "simplex_strategy")  # dual simplex: new rows keep the basis dual feasible
             check(h.addVars(self.p, (self._lo - x0) / self._d, (self._hi - x0) / self._d), "addVars")
-            check(h.changeColsCost(self.p, np.arange(self.p, dtype=np.int32), self._cost(j) * self._d), "changeColsCost")
+            # cost +-1 on the scaled column (not +-d_i, which is tiny when the strips are narrow and would fall
+            # below HiGHS's dual tolerance); the duals are mapped back with d_i in _bound
+            check(h.changeColsCost(self.p, np.arange(self.p, dtype=np.int32), self._cost(j)), "changeColsCost")
             self._x0[:, j] = x0
             self._models[j] = h
             if self._ws[j]:
@@ -300,6 +302,14 @@ class OnlineHull:
     def _add_and_solve(self, j: int, rows: np.ndarray) -> str:
         """Add rows to model j and re-solve; a model HiGHS rejects or cannot solve is rebuilt once around the
         current box's midpoint. Returns 'ok', 'infeasible' or 'failed'."""
+        if self._models[j] is not None:
+            # the box has shrunk far around another point than this model's origin: re-centre the model (its
+            # row bounds would otherwise be huge in units of the strips, beyond the LP's precision)
+            width = self._upper - self._lower
+            off = np.abs(self._x0[:, j] - (0.5 * self._lower + 0.5 * self._upper))
+            if np.any(off > 1e3 * width + 1e-300):
+                self._models[j] = None
+                self._duals[j] = None
         for attempt in range(2):
             try:
                 self._add(j, rows)
@@ -341,7 +351,7 @@ class OnlineHull:
             return
         ws = np.asarray(self._ws[j], dtype=np.int64)
         r = power2_scale(0.5 * self._bu[ws] - 0.5 * self._bl[ws])
-        yd = rd * r  # duals of the unscaled rows (the cost was scaled as c' = D c)
+        yd = rd * r * self._d[j % self.p]  # duals of the unscaled rows for the cost +-e_i: y_k = d_i r_k y'_k
         nz = yd != 0.0
         rows = ws[nz]
         mu = shifted_safe_bound(self._W[rows], self._bl[rows], self._bu[rows], box_lo, box_hi, self._cost(j), yd[nz],
