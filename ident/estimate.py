@@ -252,6 +252,13 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     still encloses S), and per method ``lp_iterations``, ``lp_solves``, ``working_rows``, ``rounds``
     (hull) or ``sweeps`` (cgsp). With ``check_consistency=False`` a cgsp box carries no emptiness check.
     Raises :class:`InconsistentDataError` when S is proven empty; ``ValueError``/``TypeError`` on bad input.
+
+    Units: any consistent units give the same box (converted back), to ``1e-6`` of its width plus the
+    change of the problem by the rounding of the converted data (``tests/ident/test_units.py`` states and
+    checks the tolerance); the LPs are scaled inside (rows by their bound, then columns, powers of two).
+    When HiGHS cannot solve an LP, the affected endpoints are coarser safe bounds or the prior's and a
+    :class:`~ident.lpsolver.LPFallbackWarning` says which (``info['fallbacks']``); a fallback never makes a
+    box tighter.
     """
     t0 = time.perf_counter()
     method = _check_method(method)

@@ -152,6 +152,8 @@ def _add_dense_rows(h: highspy.Highs, A: np.ndarray, lo: np.ndarray, hi: np.ndar
 
 _OPTIMAL = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
+_ERROR = highspy.HighsStatus.kError
+_ERROR_MODEL = highspy.HighsModelStatus.kSolveError
 
 
 def shifted_safe_bound(A, bl, bu, xl, xu, c, y, x0) -> float:
@@ -329,10 +331,10 @@ def interval_hull(
         """Solve LP j on the working set, refining against the pool; False if infeasible."""
         for _ in range(max_rounds):
             check(h.changeColsCost(p, cols, costs[j]), "changeColsCost")
-            h.run()
+            run_error = h.run() == _ERROR
             counters["iterations"] += int(h.getInfo().simplex_iteration_count)
             counters["solves"] += 1
-            ms = h.getModelStatus()
+            ms = _ERROR_MODEL if run_error else h.getModelStatus()
             if ms == _INFEASIBLE:
                 return False
             sol = h.getSolution()
@@ -521,10 +523,10 @@ def chebyshev(
     rounds = 0
     while True:
         rounds += 1
-        h.run()
+        run_error = h.run() == _ERROR
         iterations += int(h.getInfo().simplex_iteration_count)
         sol = h.getSolution()
-        if h.getModelStatus() != _OPTIMAL or not sol.value_valid:
+        if run_error or h.getModelStatus() != _OPTIMAL or not sol.value_valid:
             raise LPError(f"HiGHS failed on the Chebyshev LP: {h.modelStatusToString(h.getModelStatus())}")
         z = np.asarray(sol.col_value) * d
         dtheta, s = z[:p], z[p]

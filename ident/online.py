@@ -326,10 +326,12 @@ class OnlineHull:
     def _solve(self, j: int) -> str:
         h = self._model(j)
         self._duals[j] = None  # until this solve gives duals for the model's current rows
-        h.run()
+        run_error = h.run() == highspy.HighsStatus.kError
         info = h.getInfo()
         self.stats["lp_solves"] += 1
         self.stats["lp_iterations"] += int(info.simplex_iteration_count)
+        if run_error:
+            return "failed"
         status = h.getModelStatus()
         if status == _INFEASIBLE:
             return "infeasible"

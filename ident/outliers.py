@@ -412,9 +412,9 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
             xl[p + np.array(E, dtype=np.int64)] = 1.0
             xu[p + np.array(K, dtype=np.int64)] = 0.0
             lp.changeColsBounds(ncol, all_cols, xl / model.d, xu / model.d)
-            lp.run()
+            run_error = lp.run() == highspy.HighsStatus.kError
             s = lp.getSolution()
-            if lp.getModelStatus() != _OPTIMAL or not s.value_valid or not s.dual_valid:
+            if run_error or lp.getModelStatus() != _OPTIMAL or not s.value_valid or not s.dual_valid:
                 closed = min(closed, lbp)  # no usable duals: the parent's bound stays valid for this region
                 continue
             lb = max(lbp, model.safe_bound(lp_cost, s.row_dual, xl, xu))

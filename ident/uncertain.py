@@ -177,9 +177,9 @@ def _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol=1e-9, center=None):
         check(h.addVars(p + 1, (xl - x0) / d, (xu - x0) / d), "addVars")
         add_dense_rows(h, A * d * r[:, None], (bl - a0) * r, (bu - a0) * r)
         check(h.changeColsCost(p + 1, np.arange(p + 1, dtype=np.int32), cost * d), "changeColsCost")
-        h.run()
+        run_error = h.run() == highspy.HighsStatus.kError
         sol = h.getSolution()
-        if h.getModelStatus() != highspy.HighsModelStatus.kOptimal or not sol.value_valid:
+        if run_error or h.getModelStatus() != highspy.HighsModelStatus.kOptimal or not sol.value_valid:
             raise LPError(f"HiGHS failed on the Oettli-Prager scale LP: {h.modelStatusToString(h.getModelStatus())}")
         rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(2 * m)
         if rd.size != 2 * m:

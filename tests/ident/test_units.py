@@ -237,9 +237,14 @@ def test_online_hull_in_other_units():
 
 # --------------------------------------------------------------------------------------------- no stdout
 def test_no_solver_output_reaches_stdout():
-    """HiGHS prints its banner to file descriptor 1 at the first Highs() of a process (from C)."""
+    """HiGHS prints its banner to file descriptor 1 at the first Highs() of a process (from C). The first
+    models are made by four threads at once (the redirection around the first construction is locked)."""
     code = (
+        "import threading\n"
         "import numpy as np, ident\n"
+        "from ident.lpsolver import new_highs\n"
+        "ts = [threading.Thread(target=new_highs, args=(1e-9,)) for _ in range(4)]\n"
+        "[t.start() for t in ts]; [t.join() for t in ts]\n"
         "from ident.online import OnlineHull\n"
         "rng = np.random.default_rng(0); W = rng.standard_normal((60, 3)); y = W @ np.ones(3)\n"
         "P = (np.zeros(3), 2 * np.ones(3))\n"
