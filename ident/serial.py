@@ -1,0 +1,468 @@
+"""Inverse-dynamics regressor of a serial robot read from a URDF (pinocchio), and its base parameters.
+
+A second provider of ``(W, y, bound)`` for the robot-agnostic estimators of :mod:`ident` (the first is the H4's
+:mod:`ident.regressor`). For ``n_joints`` actuated joints the torque model is linear in the standard parameters:
+
+    tau_i = Y_i(q, qd, qdd) . pi  +  fv_i qd_i + fs_i sign(qd_i) + Ia_i qdd_i + off_i   (+ coupled-wrist terms)
+
+* ``pi``: the 10 standard inertial parameters of every moving link, in pinocchio's order
+  ``m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz`` (mass [kg], first moment ``m c`` [kg m], inertia about the
+  JOINT frame origin in the joint frame [kg m^2]); ``Y`` is ``pinocchio.computeJointTorqueRegressor``.
+* per joint: viscous ``fv`` [N m s/rad], Coulomb ``fs`` [N m], actuator (rotor) inertia reflected to the
+  joint ``Ia`` [kg m^2], torque offset ``off`` [N m] (current-sensor offset, gravity of unmodelled cables).
+* coupled wrist (``coupled_wrist=(a, b)``, 0-based joints): the motor of joint b also turns with joint a, so
+  its motor angle is ``r_b (q_a + q_b)`` (the Staubli TX40: a = 4, b = 5). The motor's rotor inertia, viscous
+  and Coulomb friction act on ``qd_a + qd_b`` and, by the power balance ``tau_joint = R^T tau_motor``, load
+  rows a and b equally: columns ``Iam`` (``qdd_a + qdd_b``), ``fvm`` (``qd_a + qd_b``) and ``fsm``
+  (``sign(qd_a + qd_b)``) on both rows, all reflected to the joint side (multiplied by ``r_b^2`` resp.
+  ``r_b``). The FIGAROH TX40 example puts ``qdd_b`` on row a and ``qdd_a`` on row b instead (and likewise
+  for the viscous term); the two column sets span the same space (its ``Ia_a`` is ours plus ``Iam``), so
+  torques and base-parameter fits agree; ours keeps every extra parameter a non-negative physical quantity.
+
+Rows are stacked sample k, joint i -> row ``n_joints * k + i``, as everywhere in :mod:`ident`.
+
+Base parameters (Gautier 1990; Khalil & Dombre, ch. 12). Some standard parameters have no effect on the
+torques and others act only in fixed linear combinations. From the stacked regressor ``W`` at random states
+(positions uniform within the joint limits, velocities and accelerations Gaussian), a QR decomposition with
+column pivoting ``W P = Q R`` gives the numerical rank r (``|R_jj| > tol |R_00|``) and r independent
+columns ``I``; every other column is ``W_D = W_I beta`` (least squares; exactly, up to rounding, for a
+structural dependence). The base parameters are ``theta_b = theta_I + beta theta_D = B theta`` with the
+``(r, p)`` matrix ``B`` (:attr:`BaseParameters.matrix`), and ``W theta = W_I theta_b`` for every theta.
+pinocchio is imported lazily: importing this module does not need it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters"]
+
+INERTIAL_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")  # pinocchio's order
+_INERTIAL_UNITS = ("kg", "kg m", "kg m", "kg m") + ("kg m^2",) * 6
+_EXTRA_UNITS = {"fv": "N m s/rad", "fs": "N m", "Ia": "kg m^2", "off": "N m",
+                "Iam": "kg m^2", "fvm": "N m s/rad", "fsm": "N m"}
+
+
+def _pinocchio():
+    try:
+        import pinocchio
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("ident.serial needs pinocchio: pip install pin") from exc
+    return pinocchio
+
+
+def _states(x, name: str, n_joints: int) -> np.ndarray:
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
+    try:
+        arr = np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}") from exc
+    if arr.ndim == 1:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != n_joints:
+        raise ValueError(f"{name} must have shape (n, {n_joints}) (or ({n_joints},)), got {np.shape(x)}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(arr))} non-finite entries")
+    return arr
+
+
+@dataclass(frozen=True)
+class BaseParameters:
+    """Base (identifiable) parameters as linear combinations of the standard ones.
+
+    independent : (r,) standard columns kept (ascending); dependent : (p - r,) the others; beta : (r, p - r)
+    with ``W[:, dependent] = W[:, independent] @ beta``; matrix : (r, p) ``B`` with ``theta_b = B theta``
+    (``B[:, independent] = I``, ``B[:, dependent] = beta``); names : (r,) short names (the kept standard
+    parameter's name, with ``'`` when it absorbs others); expressions : (r,) the combination as text;
+    standard_names : (p,) ; rank_tolerance, singular_gap : the QR's relative threshold and the ratio of the
+    last kept ``|R_jj|`` to the first dropped one (a large gap means a clear numerical rank).
+    """
+
+    independent: np.ndarray
+    dependent: np.ndarray
+    beta: np.ndarray
+    matrix: np.ndarray
+    names: tuple[str, ...]
+    expressions: tuple[str, ...]
+    standard_names: tuple[str, ...]
+    units: tuple[str, ...]
+    rank_tolerance: float
+    singular_gap: float
+    info: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def __len__(self) -> int:
+        return self.independent.size
+
+    def from_standard(self, theta) -> np.ndarray:
+        """(r,) base parameters ``B theta`` of standard parameters theta (p,) (or (..., p) -> (..., r))."""
+        theta = np.asarray(theta, dtype=float)
+        if theta.shape[-1] != self.matrix.shape[1]:
+            raise ValueError(f"theta must have {self.matrix.shape[1]} standard parameters (last axis), got "
+                             f"shape {theta.shape}")
+        return theta @ self.matrix.T
+
+    def regressor(self, W) -> np.ndarray:
+        """(m, r) base regressor: the independent columns of a standard regressor W (m, p)."""
+        W = np.asarray(W, dtype=float)
+        if W.ndim != 2 or W.shape[1] != self.matrix.shape[1]:
+            raise ValueError(f"W must have shape (m, {self.matrix.shape[1]}), got {W.shape}")
+        return W[:, self.independent]
+
+    def box_from_standard(self, lower, upper) -> tuple[np.ndarray, np.ndarray]:
+        """Hull of ``{B theta : lower <= theta <= upper}`` (exact for a linear map: mid +- |B| rad), rounded out."""
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        p = self.matrix.shape[1]
+        if lower.shape != (p,) or upper.shape != (p,) or np.any(lower > upper):
+            raise ValueError(f"lower, upper must be (p,) = ({p},) with lower <= upper, got {lower.shape}, {upper.shape}")
+        mid, rad = 0.5 * (lower + upper), 0.5 * (upper - lower)
+        c, r = self.matrix @ mid, np.abs(self.matrix) @ rad
+        slack = 4.0 * p * np.finfo(float).eps * (np.abs(self.matrix) @ np.maximum(np.abs(lower), np.abs(upper)))
+        return np.nextafter(c - r - slack, -np.inf), np.nextafter(c + r + slack, np.inf)
+
+
+def _expression(i_col: int, dep: np.ndarray, row: np.ndarray, names) -> str:
+    terms = [names[i_col]]
+    for j, c in zip(dep, row):
+        if c != 0.0:
+            terms.append(f"{'+' if c > 0 else '-'} {abs(c):.6g} {names[j]}")
+    return " ".join(terms)
+
+
+def base_parameters(W, names, units=None, *, tol: float = 1e-8, clean: float = 1e-10) -> BaseParameters:
+    """Base parameters from a stacked standard regressor W (m, p) at generic states (module docstring).
+
+    names : (p,) standard names; units : (p,) or None; tol : rank threshold relative to ``|R_00|`` of the
+    column-pivoted QR; clean : coefficients of beta below ``clean`` (relative to the largest entry of its row
+    and to 1) are set to 0 (rounding residue of exact structural dependences).
+    """
+    import scipy.linalg
+
+    W = np.asarray(W, dtype=float)
+    if W.ndim != 2 or W.shape[0] < W.shape[1]:
+        raise ValueError(f"W must have shape (m, p) with m >= p (enough random states), got {W.shape}")
+    names = tuple(names)
+    p = W.shape[1]
+    if len(names) != p:
+        raise ValueError(f"names must have {p} entries to match W's columns, got {len(names)}")
+    units = tuple(units) if units is not None else ("",) * p
+    _, R, piv = scipy.linalg.qr(W, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    if d[0] == 0.0:
+        raise ValueError("W is zero: no parameter affects the torques")
+    r = int(np.sum(d > tol * d[0]))
+    gap = float(d[r - 1] / d[r]) if r < p and d[r] > 0 else math.inf
+    independent = np.sort(piv[:r])
+    dependent = np.sort(piv[r:])
+    WI = W[:, independent]
+    beta = np.linalg.lstsq(WI, W[:, dependent], rcond=None)[0] if dependent.size else np.zeros((r, 0))
+    scale = np.maximum(np.abs(beta).max(axis=1, keepdims=True, initial=0.0), 1.0)
+    beta = np.where(np.abs(beta) < clean * scale, 0.0, beta)
+    B = np.zeros((r, p))
+    B[np.arange(r), independent] = 1.0
+    B[:, dependent] = beta
+    resid = float(np.max(np.abs(W[:, dependent] - WI @ beta), initial=0.0)) / float(np.max(np.abs(W)))
+    base_names = tuple(names[i] + ("'" if np.any(beta[k]) else "") for k, i in enumerate(independent))
+    expr = tuple(_expression(i, dependent, beta[k], names) for k, i in enumerate(independent))
+    return BaseParameters(independent=independent, dependent=dependent, beta=beta, matrix=B, names=base_names,
+                          expressions=expr, standard_names=names, units=tuple(units[i] for i in independent),
+                          rank_tolerance=tol, singular_gap=gap, info={"relative_residual": resid})
+
+
+class SerialRobot:
+    """Standard-parameter regressor of a serial robot from a URDF (pinocchio), with friction, rotor inertia,
+    torque offsets and an optional coupled wrist (module docstring).
+
+    urdf : path to the URDF; friction, rotor_inertia, offset : include the per-joint ``fv, fs``, ``Ia``, ``off``
+    columns; coupled_wrist : None or a pair (a, b) of 0-based joints (motor of b turns with a).
+    The model must have one degree of freedom per joint (revolute or prismatic; nq == nv).
+
+    Attributes: n_joints, joint_names, names (p,), units (p,), n_inertial (= 10 n_joints).
+    """
+
+    def __init__(self, urdf: str | os.PathLike, *, friction: bool = True, rotor_inertia: bool = True,
+                 offset: bool = True, coupled_wrist: tuple[int, int] | None = None) -> None:
+        pin = _pinocchio()
+        if not isinstance(urdf, (str, os.PathLike)):
+            raise TypeError(f"urdf must be a path, got {type(urdf).__name__}")
+        if not os.path.isfile(urdf):
+            raise ValueError(f"urdf must be an existing file, got {os.fspath(urdf)!r}")
+        self.model = pin.buildModelFromUrdf(os.fspath(urdf))
+        self.data = self.model.createData()
+        nj = self.model.njoints - 1
+        if self.model.nq != nj or self.model.nv != nj:
+            raise ValueError(f"urdf must describe a serial chain of 1-dof joints (nq == nv == joints), got nq = "
+                             f"{self.model.nq}, nv = {self.model.nv}, {nj} joints")
+        self.n_joints = nj
+        self.joint_names = tuple(self.model.names[i] for i in range(1, nj + 1))
+        self.friction, self.rotor_inertia, self.offset = bool(friction), bool(rotor_inertia), bool(offset)
+        if coupled_wrist is not None:
+            a, b = (int(v) for v in coupled_wrist)
+            if not (0 <= a < nj and 0 <= b < nj and a != b):
+                raise ValueError(f"coupled_wrist must be two distinct joints in [0, {nj}), got {coupled_wrist!r}")
+            coupled_wrist = (a, b)
+        self.coupled_wrist = coupled_wrist
+        names, units = [], []
+        for i in range(nj):
+            names += [f"{n}{i + 1}" for n in INERTIAL_NAMES]
+            units += list(_INERTIAL_UNITS)
+        self.n_inertial = len(names)
+        self._extras = [k for k, on in (("fv", friction), ("fs", friction), ("Ia", rotor_inertia), ("off", offset))
+                        if on]
+        for k in self._extras:
+            names += [f"{k}{i + 1}" for i in range(nj)]
+            units += [_EXTRA_UNITS[k]] * nj
+        if coupled_wrist is not None:
+            b = coupled_wrist[1] + 1
+            names += [f"Iam{b}", f"fvm{b}", f"fsm{b}"]
+            units += [_EXTRA_UNITS["Iam"], _EXTRA_UNITS["fvm"], _EXTRA_UNITS["fsm"]]
+        self.names: tuple[str, ...] = tuple(names)
+        self.units: tuple[str, ...] = tuple(units)
+
+    # ------------------------------------------------------------------------------------------ regressor
+    @property
+    def n_parameters(self) -> int:
+        return len(self.names)
+
+    def inertial_regressor(self, q, qd, qdd) -> np.ndarray:
+        """(n_joints n, 10 n_joints) ``computeJointTorqueRegressor`` stacked sample-major. q, qd, qdd : (n, nj)."""
+        pin = _pinocchio()
+        nj = self.n_joints
+        q, qd, qdd = (_states(x, nm, nj) for x, nm in ((q, "q"), (qd, "qd"), (qdd, "qdd")))
+        if not (q.shape == qd.shape == qdd.shape):
+            raise ValueError(f"q, qd, qdd must have the same shape, got {q.shape}, {qd.shape}, {qdd.shape}")
+        n = q.shape[0]
+        out = np.empty((n, nj, 10 * nj))
+        m, d = self.model, self.data
+        for k in range(n):
+            out[k] = pin.computeJointTorqueRegressor(m, d, q[k], qd[k], qdd[k])
+        return out.reshape(n * nj, 10 * nj)
+
+    def extra_columns(self, qd, qdd) -> np.ndarray:
+        """(n_joints n, p - 10 n_joints) the friction, rotor-inertia, offset and coupled-wrist columns."""
+        nj = self.n_joints
+        qd, qdd = _states(qd, "qd", nj), _states(qdd, "qdd", nj)
+        if qd.shape != qdd.shape:
+            raise ValueError(f"qd, qdd must have the same shape, got {qd.shape}, {qdd.shape}")
+        n = qd.shape[0]
+        blocks = {"fv": qd, "fs": np.sign(qd), "Ia": qdd, "off": np.ones_like(qd)}
+        cols = []
+        eye = np.eye(nj)
+        for k in self._extras:
+            cols.append(blocks[k][:, :, None] * eye[None, :, :])  # (n, nj rows, nj cols): diagonal per sample
+        if self.coupled_wrist is not None:
+            a, b = self.coupled_wrist
+            c = np.zeros((n, nj, 3))
+            for row in (a, b):
+                c[:, row, 0] = qdd[:, a] + qdd[:, b]
+                c[:, row, 1] = qd[:, a] + qd[:, b]
+                c[:, row, 2] = np.sign(qd[:, a] + qd[:, b])
+            cols.append(c)
+        if not cols:
+            return np.zeros((n * nj, 0))
+        return np.concatenate(cols, axis=2).reshape(n * nj, -1)
+
+    def regressor(self, q, qd, qdd, columns=None) -> np.ndarray:
+        """(n_joints n, p) standard regressor, rows ``n_joints k + i``; ``columns`` (indices) selects some
+        columns (e.g. :attr:`BaseParameters.independent`) without holding the full matrix."""
+        W = np.concatenate([self.inertial_regressor(q, qd, qdd), self.extra_columns(qd, qdd)], axis=1)
+        return W if columns is None else W[:, np.asarray(columns)]
+
+    # ------------------------------------------------------------------------------------------ parameters
+    def urdf_parameters(self, extras: dict | None = None) -> np.ndarray:
+        """(p,) standard parameters: the URDF's inertias (pinocchio ``toDynamicParameters``) and the extras.
+
+        extras : {prefix: value or (n_joints,) values} for ``fv, fs, Ia, off`` and scalars for ``Iam, fvm,
+        fsm``; missing ones are 0.
+        """
+        extras = dict(extras or {})
+        theta = np.zeros(self.n_parameters)
+        for i in range(self.n_joints):
+            theta[10 * i: 10 * i + 10] = self.model.inertias[i + 1].toDynamicParameters()
+        col = self.n_inertial
+        for k in self._extras:
+            theta[col: col + self.n_joints] = np.broadcast_to(np.asarray(extras.pop(k, 0.0), float), (self.n_joints,))
+            col += self.n_joints
+        if self.coupled_wrist is not None:
+            for k in ("Iam", "fvm", "fsm"):
+                theta[col] = float(extras.pop(k, 0.0))
+                col += 1
+        if extras:
+            raise ValueError(f"extras has unknown keys {sorted(extras)}; expected some of {self._extras} "
+                             f"{'+ Iam, fvm, fsm' if self.coupled_wrist else ''}")
+        return theta
+
+    def random_states(self, n: int, seed: int = 0, speed: float = 1.0, accel: float = 5.0):
+        """n random states (q uniform within the URDF limits, clipped to +-pi; qd ~ N(0, speed^2) [rad/s],
+        qdd ~ N(0, accel^2) [rad/s^2]); returns (q, qd, qdd), each (n, n_joints)."""
+        rng = np.random.default_rng(seed)
+        lo = np.maximum(np.asarray(self.model.lowerPositionLimit), -np.pi)
+        hi = np.minimum(np.asarray(self.model.upperPositionLimit), np.pi)
+        lo = np.where(hi > lo, lo, -np.pi)
+        hi = np.where(hi > lo, hi, np.pi)
+        q = rng.uniform(lo, hi, size=(n, self.n_joints))
+        return q, rng.normal(0, speed, (n, self.n_joints)), rng.normal(0, accel, (n, self.n_joints))
+
+    def base(self, n_samples: int = 200, seed: int = 0, tol: float = 1e-8) -> BaseParameters:
+        """Base parameters by QR with column pivoting on ``n_samples`` random states (module docstring)."""
+        if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
+            raise ValueError(f"n_samples must be an integer >= 1, got {n_samples!r}")
+        q, qd, qdd = self.random_states(int(n_samples), seed)
+        return base_parameters(self.regressor(q, qd, qdd), self.names, self.units, tol=tol)
+
+
+# ---------------------------------------------------------------------------------------------- processing
+def rich_friction_columns(qd, v_s: float) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Columns of a richer friction law, per joint i: ``|qd_i|`` (direction-dependent viscous: with ``fv``,
+    ``fv+ != fv-``), ``sign(qd_i) exp(-|qd_i| / v_s)`` (Stribeck: static friction above Coulomb at low speed),
+    ``qd_i |qd_i|`` (quadratic, lubricant drag). qd : (n, nj) [rad/s]; v_s [rad/s] > 0.
+    Returns ((n, nj, 3 nj) block-diagonal columns, names ``fva_i, fst_i, fvq_i``)."""
+    qd = np.asarray(qd, dtype=float)
+    if not (isinstance(v_s, (int, float)) and math.isfinite(v_s) and v_s > 0):
+        raise ValueError(f"v_s must be a finite number > 0 [rad/s], got {v_s!r}")
+    n, nj = qd.shape
+    eye = np.eye(nj)
+    a = np.abs(qd)
+    blocks = [a, np.sign(qd) * np.exp(-a / v_s), qd * a]
+    cols = np.concatenate([blk[:, :, None] * eye[None] for blk in blocks], axis=2)
+    names = tuple(f"{k}{i + 1}" for k in ("fva", "fst", "fvq") for i in range(nj))
+    return cols, names
+
+
+def _by_fours(fn, X: np.ndarray) -> list[np.ndarray]:
+    """Apply ``fn`` (written for 4 joint columns, :mod:`ident.filtering`) to groups of 4 columns of X (n, nj),
+    the last group padded by repeating its columns; returns fn's outputs per group with the pad removed."""
+    nj = X.shape[1]
+    outs = []
+    for g in range(0, nj, 4):
+        cols = list(range(g, min(g + 4, nj)))
+        pad = (cols * 4)[:4]
+        outs.append((fn(X[:, pad]), len(cols)))
+    return outs
+
+
+@dataclass(frozen=True)
+class SerialEquation:
+    """Processed equation ``y = W theta + e`` of an n-joint log, ``|e_r| <= gain * b_joint(r) + rounding_r``.
+
+    W : (m, r) filtered, decimated regressor (base columns); y : (m,) filtered torques [N m]; gain : ``||h||_1``
+    of the parallel filter (rounded up), the factor by which a raw-row bound ``b`` grows (``|h| * b = gain b``
+    for a per-joint constant b); rounding : (m,) rigorous floating-point error of the filter for theta in the
+    prior (``|h| |y|`` and ``|h| |W| |theta|_max`` terms); sample : (m,) centre sample of each row's window;
+    joint : (m,) joint of each row; names : (r,) columns; window : (m, 2) first and last raw sample used.
+    """
+
+    W: np.ndarray
+    y: np.ndarray
+    gain: float
+    rounding: np.ndarray
+    sample: np.ndarray
+    joint: np.ndarray
+    names: tuple[str, ...]
+    window: np.ndarray
+    info: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def __len__(self) -> int:
+        return self.y.size
+
+    def bound(self, raw_bound) -> np.ndarray:
+        """(m,) rigorous bound of the filtered rows for a raw-row bound: scalar or (n_joints,) per joint [N m]."""
+        b = np.asarray(raw_bound, dtype=float)
+        nj = int(self.joint.max()) + 1 if self.joint.size else 0
+        b = np.broadcast_to(b, (nj,)) if b.ndim == 0 else b
+        if b.ndim != 1 or b.size < nj or np.any(~np.isfinite(b)) or np.any(b < 0):
+            raise ValueError(f"raw_bound must be a finite scalar or ({nj},) per joint, >= 0, got {raw_bound!r}")
+        raw = b[self.joint] * self.gain + self.rounding
+        return np.nextafter(raw * (1.0 + 4.0 * np.finfo(float).eps), np.inf)
+
+    def subset(self, rows) -> "SerialEquation":
+        rows = np.asarray(rows)
+        return SerialEquation(self.W[rows], self.y[rows], self.gain, self.rounding[rows], self.sample[rows],
+                              self.joint[rows], self.names, self.window[rows], dict(self.info))
+
+
+def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cutoff_hz: float, decimation: int,
+            numtaps: int | None = None, fir_cutoff: float = 0.8, speed_threshold: float = 0.05,
+            theta_abs_max=None, butter_order: int = 4, first_sample: int = 0, rich_friction: float | None = None,
+            keep_raw: bool = False) -> SerialEquation:
+    """The paper's processing chain (:mod:`ident.processing`) for an n-joint serial robot.
+
+    q : (n, nj) measured joint angles [rad]; tau : (n, nj) joint torques [N m]; dt [s]; cutoff_hz : zero-phase
+    Butterworth cut-off on q (one pass) [Hz]; derivatives by central differences (:func:`ident.filtering.derivatives`,
+    transient samples dropped); the base regressor; rows whose joint speed (for coupled-wrist rows also
+    ``|qd_a + qd_b|``, the argument of ``sign`` in ``fsm``) is below ``speed_threshold`` [rad/s] are marked;
+    parallel filtering (:func:`ident.filtering.parallel_filter`, FIR of :func:`ident.filtering.decimation_fir`)
+    and decimation, an output row kept iff its whole window is free of marked rows. theta_abs_max : (r,) max
+    ``|theta_b|`` over the prior, folds the filter's rounding on W into :attr:`SerialEquation.rounding`.
+    first_sample : index of q[0] in the whole log (for ``sample``). rich_friction : None, or a Stribeck velocity
+    ``v_s`` [rad/s]: append per joint the columns of a richer friction law (:func:`rich_friction_columns`), to
+    measure how much of the residual the standard law leaves (they are not standard parameters); their
+    entries of ``theta_abs_max`` must then be given too. keep_raw : keep the unfiltered equation in
+    ``info['raw']`` (``W`` (n', nj, r), ``y`` (n', nj), ``sample`` (n',)) for residual spectra.
+    :mod:`ident.filtering` is written for 4
+    joints: it is applied here to groups of 4 joints (the last padded by repetition), joint by joint as it is.
+    """
+    from ident.filtering import decimation_fir, default_edge_samples, derivatives, parallel_filter
+
+    nj = robot.n_joints
+    q = _states(q, "q", nj)
+    tau = _states(tau, "tau", nj)
+    if q.shape != tau.shape:
+        raise ValueError(f"q and tau must have the same shape, got {q.shape}, {tau.shape}")
+    est = [(d, k) for d, k in _by_fours(lambda x: derivatives(x, dt, cutoff_hz, butter_order), q)]
+    valid = est[0][0].valid
+    qf = np.concatenate([d.q[:, :k] for d, k in est], axis=1)[valid]
+    qd = np.concatenate([d.qd[:, :k] for d, k in est], axis=1)[valid]
+    qdd = np.concatenate([d.qdd[:, :k] for d, k in est], axis=1)[valid]
+    samples = np.arange(q.shape[0])[valid] + int(first_sample)
+    n = qf.shape[0]
+    W = robot.regressor(qf, qd, qdd, columns=base.independent).reshape(n, nj, len(base))
+    names = base.names
+    if rich_friction is not None:
+        extra, extra_names = rich_friction_columns(qd, rich_friction)
+        W = np.concatenate([W, extra], axis=2)
+        names = names + extra_names
+    y = tau[valid]
+    slow = np.abs(qd) < speed_threshold
+    if robot.coupled_wrist is not None:
+        a, b = robot.coupled_wrist
+        s = np.abs(qd[:, a] + qd[:, b]) < speed_threshold
+        slow[:, a] |= s
+        slow[:, b] |= s
+    taps = decimation_fir(decimation, numtaps, fir_cutoff)
+    L = taps.size
+    t_abs = None if theta_abs_max is None else np.asarray(theta_abs_max, dtype=float)
+    parts = []
+    for g in range(0, nj, 4):
+        cols = list(range(g, min(g + 4, nj)))
+        pad = (cols * 4)[:4]
+        fe = parallel_filter(W[:, pad, :].reshape(4 * n, -1), y[:, pad].reshape(-1), 0.0, decimation, taps=taps,
+                             theta_abs_max=t_abs)
+        k = len(cols)
+        m = fe.sample_index.size
+        parts.append((fe.W.reshape(m, 4, -1)[:, :k], fe.y.reshape(m, 4)[:, :k], fe.bound.reshape(m, 4)[:, :k]))
+        gain = fe.l1_norm
+        start = fe.window_start
+    Wf = np.concatenate([p[0] for p in parts], axis=1)
+    yf = np.concatenate([p[1] for p in parts], axis=1)
+    rf = np.concatenate([p[2] for p in parts], axis=1)
+    m = start.size
+    bad = np.concatenate([np.zeros((1, nj)), np.cumsum(slow, axis=0)])
+    keep = (bad[start + L] - bad[start]) == 0  # (m, nj)
+    rows = np.flatnonzero(keep.reshape(-1))
+    k_idx, j_idx = rows // nj, rows % nj
+    centre = samples[start + (L - 1) // 2]
+    window = np.stack([samples[start], samples[start + L - 1]], axis=1)
+    info = {"raw_samples": int(q.shape[0]), "valid_samples": int(n), "edge_samples": int(valid.start),
+            "taps": int(L), "decimation": int(decimation), "filtered_rows": int(m * nj), "rows_kept": int(rows.size),
+            "rows_slow": int(slow.sum()), "butterworth_padding": default_edge_samples(dt, cutoff_hz),
+            "rounding_includes_W": t_abs is not None}
+    if keep_raw:
+        info["raw"] = {"W": W, "y": y, "sample": samples}
+    return SerialEquation(W=Wf.reshape(m * nj, -1)[rows], y=yf.reshape(-1)[rows], gain=float(gain),
+                          rounding=rf.reshape(-1)[rows], sample=centre[k_idx], joint=j_idx, names=names,
+                          window=window[k_idx], info=info)
