@@ -237,8 +237,10 @@ def identify(
 ) -> None:
     """The estimators on a user's own data; prints the table (or result.json) and writes result.json.
 
-    Exit codes: 0 done; 2 bad option, file or data (one error line on stderr); 3 the data are proven
-    inconsistent with the bound (result.json is still written, with the smallest consistent bound).
+    Exit codes:
+    0 done;
+    2 bad option, file or data (one error line on stderr);
+    3 the data are proven inconsistent with the bound (result.json still written, with the smallest consistent bound).
     """
     from scenarios.identify import (EXIT_INCONSISTENT, METHODS, OptionError, identify_csv, load_prior, parse_bound,
                                     parse_number)
