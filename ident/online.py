@@ -33,8 +33,11 @@ and ``info['fallback'] = 'batch'``.
 Scaling (as :func:`ident.hull.interval_hull`): each model sees ``(theta - c_j) / d`` with ``c_j`` the
 midpoint of the box when the model is made (the shift keeps the row bounds of the size of the strips,
 however narrow), rows scaled by the power of two nearest the inverse of their half-width, and the column
-scale ``d`` of the first block after that row scaling. A model HiGHS cannot solve is rebuilt once around the
-current box's midpoint; if that fails too, its endpoint keeps its previous (valid) bound.
+scale ``d`` of the first block after that row scaling; each model's cost is ``+-1`` on its scaled column (the
+duals are mapped back with ``d_i``). A model is rebuilt around the current box's midpoint when the box has
+shrunk below 1e-5 of the model's distance to it (narrow strips: its row bounds would be beyond the LP's
+precision), and once more when HiGHS cannot solve or rejects it; if that fails too, its endpoint keeps its
+previous (valid) bound.
 """
 
 from __future__ import annotations
@@ -303,11 +306,11 @@ class OnlineHull:
         """Add rows to model j and re-solve; a model HiGHS rejects or cannot solve is rebuilt once around the
         current box's midpoint. Returns 'ok', 'infeasible' or 'failed'."""
         if self._models[j] is not None:
-            # the box has shrunk far around another point than this model's origin: re-centre the model (its
+            # the box has shrunk to 1e-5 of this model's distance to it: re-centre the model (its
             # row bounds would otherwise be huge in units of the strips, beyond the LP's precision)
             width = self._upper - self._lower
             off = np.abs(self._x0[:, j] - (0.5 * self._lower + 0.5 * self._upper))
-            if np.any(off > 1e3 * width + 1e-300):
+            if np.any(off > 1e5 * width + 1e-300):
                 self._models[j] = None
                 self._duals[j] = None
         for attempt in range(2):
