@@ -281,6 +281,7 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
         "torque_gain": settings.torque_gain,
         "controller": getattr(controller, "describe", lambda: type(controller).__name__)(),
         "wall_seconds": wall,
+        "mujoco_warnings": {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(data.warning) if w.number},
         "versions": _package_versions(),
     }
     meta.update(metadata or {})
