@@ -135,9 +135,10 @@ class H4Geometry:
     lateral_qpos0: np.ndarray  # (k,)
     nq: int
     dof_motor: np.ndarray  # (4,) dof addresses of q1..q4
-    # forearm rods: hinges a (local z) then b (local y) at B_i, far end r0 in the arm frame at qpos0
+    # forearm rods: frame turned by rod_rot in the arm frame (x along the rod at qpos0), hinges a (local y)
+    # then b (local z) at B_i, far end at (forearm_length, 0, 0)
     qpos_rod: np.ndarray  # (4, 2) qpos addresses of rod{i}_a, rod{i}_b
-    rod_end: np.ndarray  # (4, 3) the rod's far end in its own (= the arm's, at zero angles) frame [m]
+    rod_rot: np.ndarray  # (4, 3, 3) rod frame at zero hinge angles, in the arm frame
     arm_rot0: np.ndarray  # (4, 3, 3) world orientation of each arm frame at q = 0
     motor_axis_local: np.ndarray  # (4, 3) each motor axis in its arm frame
 
@@ -186,20 +187,25 @@ class H4Geometry:
             lateral_joints.append(model.body_jntadr[b])
         rods = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in FOREARM_RODS]
         rod_end = np.array([model.site_pos[sid(f"rod_end{i + 1}")] for i in range(4)])
+        rod_rot = np.zeros((4, 3, 3))
         for i, b in enumerate(rods):
             arm_body = model.jnt_bodyid[motor_ids[i]]
             axes = model.jnt_axis[model.body_jntadr[b]:model.body_jntadr[b] + 2]
-            if (model.body_parentid[b] != arm_body or not np.allclose(model.body_quat[b], [1, 0, 0, 0], atol=0)
-                    or not np.array_equal(axes, [[0, 0, 1], [0, 1, 0]])):
-                raise ModelError(f"forearm rod {FOREARM_RODS[i]!r} must be a child of its arm, unrotated, with "
-                                 f"hinge axes (0 0 1) then (0 1 0), got axes {axes.tolist()}")
+            if (model.body_parentid[b] != arm_body or not np.array_equal(axes, [[0, 1, 0], [0, 0, 1]])
+                    or rod_end[i, 0] <= 0 or np.any(rod_end[i, 1:] != 0)):
+                raise ModelError(f"forearm rod {FOREARM_RODS[i]!r} must be a child of its arm with hinge axes (0 1 0) "
+                                 f"then (0 0 1) and its far end on its local +x axis, got axes {axes.tolist()}, "
+                                 f"end {rod_end[i].tolist()}")
+            mat = np.zeros(9)
+            mujoco.mju_quat2Mat(mat, model.body_quat[b])
+            rod_rot[i] = mat.reshape(3, 3)
             if np.abs(data.xpos[b] - B[i]).max() > 1e-12:
                 raise ModelError(f"forearm rod {FOREARM_RODS[i]!r} must start at the arm tip B{i + 1}")
         rod_tip = np.array([data.site_xpos[sid(f"rod_end{i + 1}")] for i in range(4)])
         if np.abs(rod_tip - A).max() > 1e-12:
             raise ModelError("the model must be assembled closed: each rod_end_i must coincide with A_i at qpos0 "
                              f"(off by {np.abs(rod_tip - A).max():.3g} m; write the rod vectors at full precision)")
-        l = np.linalg.norm(rod_end, axis=1)
+        l = rod_end[:, 0].copy()
         key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
         nac_adr = np.array([model.jnt_qposadr[j] for j in nac_ids])
         qpos_home = model.key_qpos[key] if key >= 0 else model.qpos0
@@ -216,7 +222,7 @@ class H4Geometry:
             lateral_qpos0=np.array([model.qpos0[model.jnt_qposadr[j]] for j in lateral_joints]),
             dof_motor=np.array([model.jnt_dofadr[j] for j in motor_ids]),
             qpos_rod=np.array([[model.jnt_qposadr[model.body_jntadr[b] + k] for k in (0, 1)] for b in rods]),
-            rod_end=rod_end, motor_axis_local=np.array([model.jnt_axis[j] for j in motor_ids]),
+            rod_rot=rod_rot, motor_axis_local=np.array([model.jnt_axis[j] for j in motor_ids]),
             arm_rot0=np.array([data.xmat[model.jnt_bodyid[j]].reshape(3, 3) for j in motor_ids]),
         )
         for v in arrays.values():
@@ -240,9 +246,9 @@ class H4Geometry:
     def rod_angles(self, q, x) -> np.ndarray:
         """Forearm rod hinge angles (n, 4, 2) [rad] that put each rod's far end on A_i(x), arm at q (n, 4).
 
-        In the arm frame the rod vector v = R_arm(q)^T (A_i - B_i) must equal Rz(a) Ry(b) r0 (r0 = ``rod_end``):
-        Ry keeps the y component and Rz the z component, so b solves -r0x sin b + r0z cos b = v_z (the root
-        nearest 0) and a = atan2(v_y, v_x) - atan2(r0y, r0x cos b + r0z sin b)."""
+        In the rod's frame at zero angles the unit rod vector u = rod_rot^T R_arm(q)^T (A_i - B_i) / l must equal
+        Ry(a) Rz(b) e_x = (cos a cos b, sin b, -sin a cos b): b = asin(u_y), a = atan2(-u_z, u_x). The
+        universal joint is singular only at |b| = 90 deg, a rod turned square to its assembled direction."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         x = np.atleast_2d(np.asarray(x, dtype=float))
         from sim.kinematics import arm_tips, nacelle_points
@@ -252,14 +258,9 @@ class H4Geometry:
         k = self.motor_axis_local[None]
         c, s = np.cos(q)[..., None], np.sin(q)[..., None]
         v = w * c - s * np.cross(k, w) + (1 - c) * np.sum(k * w, axis=-1, keepdims=True) * k  # rotate by -q
-        r0x, r0y, r0z = self.rod_end[:, 0], self.rod_end[:, 1], self.rod_end[:, 2]
-        rho, phi = np.hypot(r0x, r0z), np.arctan2(r0x, r0z)  # r0z cos b - r0x sin b = rho cos(b + phi)
-        root = np.arccos(np.clip(v[..., 2] / rho, -1.0, 1.0))
-        b1, b2 = root - phi, -root - phi
-        b1, b2 = np.angle(np.exp(1j * b1)), np.angle(np.exp(1j * b2))
-        b = np.where(np.abs(b1) <= np.abs(b2), b1, b2)
-        a = np.arctan2(v[..., 1], v[..., 0]) - np.arctan2(r0y, r0x * np.cos(b) + r0z * np.sin(b))
-        return np.stack([np.angle(np.exp(1j * a)), b], axis=-1)
+        u = np.einsum("iba,nib->nia", self.rod_rot, v)
+        u = u / np.linalg.norm(u, axis=-1, keepdims=True)
+        return np.stack([np.arctan2(-u[..., 2], u[..., 0]), np.arcsin(np.clip(u[..., 1], -1.0, 1.0))], axis=-1)
 
     def nacelle_pose(self, qpos) -> np.ndarray:
         """Nacelle pose x (n, 4) read from MuJoCo qpos (n, nq)."""

@@ -241,22 +241,14 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     at, forward, law_step, array = stream.at, mujoco.mj_forward, law.step, np.array
     append_cmd, append_qm = rec_cmd.append, rec_qm.append
     wall = time.perf_counter()
-    for k in range(n):
-        q_true = qpos[qm].copy()  # the noise stream may keep it
-        q_meas, tau_cmd = law_step(k, q_true)
-        tau_cmd = array(tau_cmd)
-        ctrl[:] = tau_cmd + at(k, q_true, tau_cmd)
-        forward(model, data)  # at the sampled state: MuJoCo's qacc, applied torque, loop violation
-        rec_qpos[k] = qpos
-        rec_qvel[k] = qvel
-        rec_qacc[k] = qacc
-        rec_app[k] = act
-        efc[k, :ne] = efc_pos[:ne]
-        append_cmd(tau_cmd)
-        append_qm(q_meas)
-        advance()
-        if progress is not None and k % 1000 == 0:
-            progress(k, n)
+    try:
+        _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc, rec_app,
+              act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
+    except ValueError as exc:  # e.g. rounding a NaN angle: the state diverged
+        if np.all(np.isfinite(qpos)):
+            raise
+        raise SimulationError(f"the simulation diverged (non-finite state at t = {data.time:.4f} s); check the "
+                              "reference and the controller") from exc
     wall = time.perf_counter() - wall
     law.finish()
     rec_cmd, rec_qm = np.array(rec_cmd, dtype=float), np.array(rec_qm, dtype=float)
@@ -293,6 +285,27 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
         tau_applied=rec_app, noise=rec_app - logged, loop_violation=violation, h=h, names=TRUE_PARAMETER_ORDER,
     )
     return dataset, truth
+
+
+def _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc,
+          rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress):
+    """The 1 kHz sample loop of :func:`simulate` (locals only: the loop is the simulator's bottleneck)."""
+    for k in range(n):
+        q_true = qpos[qm].copy()  # the noise stream may keep it
+        q_meas, tau_cmd = law_step(k, q_true)
+        tau_cmd = array(tau_cmd)
+        ctrl[:] = tau_cmd + at(k, q_true, tau_cmd)
+        forward(model, data)  # at the sampled state: MuJoCo's qacc, applied torque, loop violation
+        rec_qpos[k] = qpos
+        rec_qvel[k] = qvel
+        rec_qacc[k] = qacc
+        rec_app[k] = act
+        efc[k, :ne] = efc_pos[:ne]
+        append_cmd(tau_cmd)
+        append_qm(q_meas)
+        advance()
+        if progress is not None and k % 1000 == 0:
+            progress(k, n)
 
 
 def _index(addresses: np.ndarray):

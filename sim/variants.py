@@ -8,7 +8,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.model import DEFAULT_MODEL_PATH, MOTOR_JOINTS, ModelError, _check_structure, apply_solver_constants
+from sim.model import (
+    DEFAULT_MODEL_PATH,
+    MOTOR_JOINTS,
+    ModelError,
+    _check_structure,
+    apply_solver_constants,
+)
 
 
 def _spec(path) -> mujoco.MjSpec:

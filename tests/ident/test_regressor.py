@@ -11,7 +11,12 @@ import pytest
 
 import ident
 import sim
-from tests.conftest import friction_saturated, random_workspace_poses, record_aggressive, record_exact
+from tests.conftest import (
+    friction_saturated,
+    random_workspace_poses,
+    record_aggressive,
+    record_exact,
+)
 
 
 def test_parameter_order_and_shapes(geometry, exact_recording):

@@ -7,7 +7,12 @@ import pytest
 
 import ident
 import sim
-from tests.conftest import NOMINAL, cartesian_reference, friction_saturated, run_experiment
+from tests.conftest import (
+    NOMINAL,
+    cartesian_reference,
+    friction_saturated,
+    run_experiment,
+)
 
 
 @pytest.fixture(scope="module")

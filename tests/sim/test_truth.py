@@ -57,7 +57,6 @@ def test_true_parameters_against_mujoco_mass_matrix(model, geometry):
         paper = np.diag(theta[:4]) + j.T @ np.diag([theta[4]] * 3 + [theta[5]]) @ j
         # atol: the rods' own inertia (1e-12 kg m^2, MuJoCo needs > 0) turns with them
         np.testing.assert_allclose(reduced, paper, rtol=1e-10, atol=1e-12)
-    _, full = _constrained_inertia(model, geometry, np.zeros(4), geometry.x_home)
     for i, dof in enumerate(geometry.dof_motor):
         assert theta[6 + i] == model.dof_damping[dof]
         assert theta[10 + i] == model.dof_frictionloss[dof]
