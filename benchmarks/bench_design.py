@@ -164,7 +164,8 @@ def main() -> dict:
                     "gm_ratio": float(np.exp(np.mean(np.log(np.array(w) / PAPER_RELATIVE))))}
                 for s, w in pred_widths.items()}
     b_, r_ = best["bound"], best["rho"]
-    sandwich = ((2 * (b_ - r_) * h / theta).tolist(), (np.minimum(2 * (b_ + r_) * h, 2.0) / theta).tolist())
+    sandwich = ((np.minimum(2 * (b_ - r_) * h, 2.0) / theta).tolist(),
+                (np.minimum(2 * (b_ + r_) * h, 2.0) / theta).tolist())  # both clipped by the prior [0, 2]
     ratio = np.array(best["width_relative"]) / PAPER_RELATIVE
     result = {
         "trajectories": len(rows), "failed": failed, "duration_s": duration, "cutoff_hz": args.cutoff, "rows": rows,
