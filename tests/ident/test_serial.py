@@ -224,3 +224,32 @@ def test_bad_inputs_are_named(tx40_robot, tmp_path):
         base_parameters(np.eye(3), ["a", "b"])
     with pytest.raises(ValueError, match="extras"):
         tx40_robot.urdf_parameters({"nope": 1.0})
+
+
+def test_prediction_envelope_against_linprog():
+    """Endpoints enclose scipy's LP optimum (outer) and are tight to 1e-7 relative; inside the box evaluation."""
+    from scipy.optimize import linprog
+
+    from ident.interval import point_matvec
+    from ident.serial import prediction_envelope
+
+    rng = np.random.default_rng(8)
+    m, p = 300, 7
+    W = rng.standard_normal((m, p)) * np.logspace(-2, 2, p)
+    theta = rng.uniform(-1, 1, p)
+    y = W @ theta + rng.uniform(-0.5, 0.5, m)
+    b = np.full(m, 0.5)
+    lo, hi = -3 * np.ones(p), 3 * np.ones(p)
+    W_new = rng.standard_normal((12, p)) * np.logspace(-2, 2, p)
+    elo, ehi, info = prediction_envelope(W, y, b, lo, hi, W_new)
+    A, ub = np.vstack([W, -W]), np.r_[y + b, b - y]
+    blo, bhi = point_matvec(W_new, lo, hi)
+    for k in range(W_new.shape[0]):
+        mn = linprog(W_new[k], A_ub=A, b_ub=ub, bounds=list(zip(lo, hi)), method="highs").fun
+        mx = -linprog(-W_new[k], A_ub=A, b_ub=ub, bounds=list(zip(lo, hi)), method="highs").fun
+        scale = 1 + abs(mn) + abs(mx)
+        assert elo[k] <= mn + 1e-9 * scale and ehi[k] >= mx - 1e-9 * scale
+        assert mn - elo[k] <= 1e-7 * scale and ehi[k] - mx <= 1e-7 * scale
+        assert blo[k] <= elo[k] and ehi[k] <= bhi[k]
+        assert elo[k] <= W_new[k] @ theta <= ehi[k]  # the truth is feasible
+    assert info["lp_failures"] == 0

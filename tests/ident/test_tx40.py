@@ -110,3 +110,45 @@ def test_least_squares_fit_agrees_with_figaroh():
     # FIGAROH's fv5 (row 5's own qd5 coefficient) is our fv5 + fvm6; its fvm6 is ours
     assert abs(theta_f[n_in + 4] - (names["fv5"] + names["fvm6"])) < 1e-6 * (1 + abs(names["fv5"]))
     assert abs(theta_f[-2] - names["fvm6"]) < 1e-6 * (1 + abs(names["fvm6"]))
+
+
+@pytest.mark.slow
+def test_tx40_study_quick_invariants():
+    """The scenario's study at the quick size, checked against independent computations: the envelope bounds by
+    scipy's linprog on a few held-out rows, the WLS prediction inside the model envelope when WLS is inside the
+    box, certain outliers infeasible over the relaxed box by linprog, coverage recomputed from the arrays."""
+    from scipy.optimize import linprog
+
+    from scenarios.kinds.tx40 import SPEC_DEFAULTS, run_tx40
+
+    cfg = {**SPEC_DEFAULTS["tx40"], "decimation": 200, "factors": [1.5], "outlier_q": 2}
+    result, art = run_tx40(cfg, 0)
+    m = result["methods"]["hull_1.5x"]
+    assert m["status"] == "ok"
+    env, eq_ho = art["envelope"], art["eq_ho"]
+    lo, hi = np.array(m["lower"]), np.array(m["upper"])
+    for k in np.linspace(0, len(eq_ho) - 1, 5).astype(int):
+        c = eq_ho.W[k]
+        bounds = list(zip(lo, hi))
+        mn = linprog(c, bounds=bounds, method="highs").fun
+        mx = -linprog(-c, bounds=bounds, method="highs").fun
+        tol = 1e-9 * (np.abs(c) @ np.maximum(np.abs(lo), np.abs(hi)))
+        assert env["lower"][k] <= mn + tol and env["upper"][k] >= mx - tol
+        assert mn - env["lower"][k] <= 1e-6 * (1 + abs(mn)) and env["upper"][k] - mx <= 1e-6 * (1 + abs(mx))
+    inside = (eq_ho.y >= env["lower"] - env["bound"]) & (eq_ho.y <= env["upper"] + env["bound"])
+    assert m["heldout_coverage"] == pytest.approx(np.mean(inside))
+    if m["wls_inside"]:
+        pred = eq_ho.W @ art["wls_theta"]
+        assert np.all(pred >= env["lower"] - 1e-9 * np.abs(pred)) and np.all(pred <= env["upper"] + 1e-9 * np.abs(pred))
+    rl = result["relaxed"]
+    if rl["status"] == "ok" and rl["certain_rows"]:
+        eq = art["eq"]
+        rlo, rhi = np.array(rl["lower"]), np.array(rl["upper"])
+        for c in rl["certain"][:3]:
+            row = eq.W[c["row"]]
+            mn = linprog(row, bounds=list(zip(rlo, rhi)), method="highs").fun
+            mx = -linprog(-row, bounds=list(zip(rlo, rhi)), method="highs").fun
+            y = eq.y[c["row"]]
+            assert y + c["bound"] < mn or y - c["bound"] > mx  # the strip misses the box's image
+    assert 0.0 <= m["heldout_coverage"] <= 1.0
+    assert result["min_consistent_bound"] <= max(result["bound"]["per_joint_at_1x"]) * (1 + 1e-9)
