@@ -117,13 +117,16 @@ def _column_scale(W: np.ndarray, row_scale: np.ndarray | None = None) -> np.ndar
     scaled model does not depend on the units of y (rows) nor of the parameters (columns), up to the powers of
     two. One blocked pass over W.
     """
+    common = 1.0
+    if row_scale is not None and row_scale.size and np.all(row_scale == row_scale[0]):
+        common, row_scale = float(row_scale[0]), None  # one factor for all rows (a power of two): exact
     ss = np.zeros(W.shape[1])
     for s in range(0, W.shape[0], _CHUNK):
         blk = W[s : s + _CHUNK]
         if row_scale is not None:
             blk = blk * row_scale[s : s + _CHUNK, None]
         ss += np.einsum("ij,ij->j", blk, blk)
-    return power2_scale(np.sqrt(ss / max(W.shape[0], 1)))
+    return power2_scale(np.sqrt(ss / max(W.shape[0], 1)) * common)
 
 
 def _matvec(W: np.ndarray, x: np.ndarray) -> np.ndarray:
