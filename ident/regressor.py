@@ -76,7 +76,8 @@ def regressor(geometry, q, qd, qdd, structure: str = "paper", x=None, xdd=None) 
     xdd : optional (n, 4) measured nacelle accelerations used instead of eq. 19 (``J qdd + Jd qd``), e.g. a
     simulator's own, to separate the model from the kinematic differentiation.
     """
-    from sim.kinematics import _jacobian_dot, _jacobians, arm_tips, forward_kinematics  # noqa: PLC0415
+    from sim.kinematics import (arm_tips, forward_kinematics, jacobian_dot_unchecked,  # noqa: PLC0415
+                                jacobians_unchecked)
 
     _check_structure(structure)
     q, qd, qdd = _states(q, qd, qdd)
@@ -84,8 +85,8 @@ def regressor(geometry, q, qd, qdd, structure: str = "paper", x=None, xdd=None) 
     x = forward_kinematics(geometry, q) if x is None else np.atleast_2d(np.asarray(x, dtype=float))
     if x.shape != (n, 4):
         raise ValueError(f"x must have shape ({n}, 4), got {x.shape}")
-    jac = _jacobians(geometry, q, x)
-    jd = _jacobian_dot(geometry, jac, qd)
+    jac = jacobians_unchecked(geometry, q, x)
+    jd = jacobian_dot_unchecked(geometry, jac, qd)
     xd = np.einsum("nab,nb->na", jac.J, qd)
     if xdd is None:
         xdd = np.einsum("nab,nb->na", jac.J, qdd) + np.einsum("nab,nb->na", jd, qd)

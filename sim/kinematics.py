@@ -255,3 +255,10 @@ def singularity_measure(geometry: H4Geometry, x) -> np.ndarray:
         inverse_kinematics(geometry, x2)  # raises with the details
     c = np.linalg.cond(_jacobians(geometry, q, x2).Jx)
     return c[0] if single else c
+
+
+# Public names of the unchecked, vectorised cores, for callers that validate their inputs once (the regressor,
+# trajectory design and checks): no re-validation, no exception on an unreachable pose (its reach ratio > 1).
+ik_unchecked = _ik
+jacobians_unchecked = _jacobians
+jacobian_dot_unchecked = _jacobian_dot

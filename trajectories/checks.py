@@ -27,7 +27,8 @@ import numpy as np
 
 import ident
 import sim
-from sim.kinematics import _ik, _jacobian_dot  # unchecked: per-sample reach ratio without raising; Jd
+# unchecked: per-sample reach ratio without raising; Jd
+from sim.kinematics import ik_unchecked, jacobian_dot_unchecked
 from trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
 from trajectories.trajectory import Trajectory
 
@@ -63,14 +64,14 @@ def condition_numbers(W: np.ndarray, theta_nominal: np.ndarray) -> dict:
 
 def _evaluate(geometry, x, q, qd, qdd, limits, theta):
     n = q.shape[0]
-    q_ik, ratio = _ik(geometry, x)
+    q_ik, ratio = ik_unchecked(geometry, x)
     reach = np.abs(ratio)
     dq = (q - q_ik + np.pi) % (2 * np.pi) - np.pi
     q_lo, q_hi = limits.q_bounds(geometry)
     jac = sim.jacobians(geometry, q, x=x)
     cond_jx = np.linalg.cond(jac.Jx)[:, None]
     xd = np.einsum("nab,nb->na", jac.J, qd)
-    xdd = np.einsum("nab,nb->na", jac.J, qdd) + np.einsum("nab,nb->na", _jacobian_dot(geometry, jac, qd), qd)
+    xdd = np.einsum("nab,nb->na", jac.J, qdd) + np.einsum("nab,nb->na", jacobian_dot_unchecked(geometry, jac, qd), qd)
     cart = np.stack([np.linalg.norm(xd[:, :3], axis=1), np.linalg.norm(xdd[:, :3], axis=1)], axis=1)
     W = ident.regressor(geometry, q, qd, qdd, x=x)
     tau = (W @ theta).reshape(n, 4)

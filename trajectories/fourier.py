@@ -51,7 +51,8 @@ import numpy as np
 import ident
 import sim
 from ident.filtering import ProcessingSettings
-from sim.kinematics import _ik, _jacobian_dot, _jacobians  # unchecked, vectorised (no re-validation)
+# unchecked, vectorised (no re-validation)
+from sim.kinematics import ik_unchecked, jacobian_dot_unchecked, jacobians_unchecked
 from trajectories.bounded import HalfwidthProblem, as_targets
 from trajectories.checks import check_samples
 from trajectories.design import CoefficientProblem
@@ -140,18 +141,18 @@ class FourierDesign:
         acc = p2 * (phid**2)[:, None] + p1 * phidd[:, None]
         if self.space == "joint":
             x = sim.forward_kinematics(geometry, pos)
-            return {"x": x, "q": pos, "qd": vel, "qdd": acc, "ratio": np.abs(_ik(geometry, x)[1])}
+            return {"x": x, "q": pos, "qd": vel, "qdd": acc, "ratio": np.abs(ik_unchecked(geometry, x)[1])}
         return joint_motion(geometry, pos, vel, acc)
 
 
 def joint_motion(geometry, x, xd, xdd) -> dict:
     """Joint reference from a nacelle reference (each (n, 4)): q = IK(x), qd = J^-1 xd,
     qdd = J^-1 (xdd - Jd qd) with J^-1 = diag(1/Jq) Jx. Also returns the reach ratio |c/rho| (n, 4)."""
-    q, ratio = _ik(geometry, x)
+    q, ratio = ik_unchecked(geometry, x)
     with np.errstate(divide="ignore", invalid="ignore"):  # Jq = 0 (arm singular) gives inf: caught by callers
-        jac = _jacobians(geometry, q, x)
+        jac = jacobians_unchecked(geometry, q, x)
         qd = np.einsum("nab,nb->na", jac.Jx, xd) / jac.Jq
-        jd = _jacobian_dot(geometry, jac, qd) if np.all(np.isfinite(qd)) else np.full_like(jac.J, np.nan)
+        jd = jacobian_dot_unchecked(geometry, jac, qd) if np.all(np.isfinite(qd)) else np.full_like(jac.J, np.nan)
         qdd = np.einsum("nab,nb->na", jac.Jx, xdd - np.einsum("nab,nb->na", jd, qd)) / jac.Jq
     return {"x": x, "q": q, "qd": qd, "qdd": qdd, "ratio": np.abs(ratio)}
 

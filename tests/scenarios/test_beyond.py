@@ -44,7 +44,6 @@ def outliers_run(tmp_path_factory):
 def test_outliers_quick(outliers_run):
     out, result = outliers_run
     check_schema(result, "relaxed")
-    assert result["wall_seconds"] < 30
     assert plain_fails(result["methods"]["hull"])
     assert result["methods"]["relaxed"]["all_enclosed"]
     o = result["outliers"]
@@ -70,7 +69,6 @@ def test_uncertain_regressor_quick(tmp_path):
     out = tmp_path / "unc"
     result = run_scenario("uncertain-regressor", quick=True, out=out)
     check_schema(result, "interval")
-    assert result["wall_seconds"] < 30
     assert plain_fails(result["methods"]["hull"])
     assert not result["bound_covers_residual"]  # the bound covers the noise, not the derivative errors
     assert result["methods"]["interval"]["all_enclosed"]
