@@ -60,22 +60,23 @@ def _read_table(path: Path, option: str, columns: tuple[str, ...]) -> list[tuple
     """TOML -> [(0, {key: value})] or CSV with the header ``columns`` -> [(line, row dict)]."""
     if not path.is_file():
         raise OptionError(f"{option} must name an existing .toml or .csv file, got {str(path)!r} (not found)")
-    if path.suffix.lower() == ".toml":
-        try:
+    try:
+        if path.suffix.lower() == ".toml":
             with path.open("rb") as fh:
                 return [(0, tomllib.load(fh))]
-        except tomllib.TOMLDecodeError as exc:
-            raise OptionError(f"{option} file {str(path)!r} is not valid TOML: {exc}") from None
-    if path.suffix.lower() != ".csv":
-        raise OptionError(f"{option} file must end in .toml or .csv, got {str(path)!r}")
-    with path.open(newline="") as fh:
-        rows = [r for r in csv.reader(fh) if r and any(f.strip() for f in r)]
-    header = [h.strip() for h in rows[0]] if rows else []
+        if path.suffix.lower() != ".csv":
+            raise OptionError(f"{option} file must end in .toml or .csv, got {str(path)!r}")
+        with path.open(newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            rows = [(reader.line_num, r) for r in reader if r and any(f.strip() for f in r)]
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise OptionError(f"{option} file {str(path)!r} is not valid {path.suffix[1:].upper()} text: {exc}") from None
+    header = [h.strip() for h in rows[0][1]] if rows else []
     if header != list(columns):
         raise OptionError(f"{option} file {str(path)!r} must have the CSV header {','.join(columns)}, got "
                           f"{','.join(header) or 'an empty file'}")
     out = []
-    for line, r in enumerate(rows[1:], start=2):
+    for line, r in rows[1:]:
         if len(r) != len(columns):
             raise OptionError(f"{option} file {str(path)!r} line {line} must have {len(columns)} values "
                               f"({','.join(columns)}), got {len(r)}")
