@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.model import H4Geometry
+from sim.model import H4Geometry, arm_tips, nacelle_points  # the chain points live with the geometry
 
 
 class KinematicsError(ValueError):
@@ -37,25 +37,6 @@ def _as_samples(name: str, value, width: int = 4) -> tuple[np.ndarray, bool]:
 def _check_geometry(geometry) -> None:
     if not isinstance(geometry, H4Geometry):
         raise TypeError(f"geometry must be an sim.H4Geometry, got {type(geometry).__name__}")
-
-
-def nacelle_points(geometry: H4Geometry, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A_i (n, 4, 3) and DC_i (n, 4, 3) for poses x (n, 4)."""
-    c, s = np.cos(x[:, 3])[:, None], np.sin(x[:, 3])[:, None]
-    b = geometry.bar_offset
-    dc = np.empty((x.shape[0], 4, 3))
-    dc[..., 0] = c * b[:, 0] - s * b[:, 1]  # Rz(theta) bar_offset_i
-    dc[..., 1] = s * b[:, 0] + c * b[:, 1]
-    dc[..., 2] = b[:, 2]
-    a = x[:, None, :3] + dc + geometry.attach_offset[None]
-    return a, dc
-
-
-def arm_tips(geometry: H4Geometry, q: np.ndarray) -> np.ndarray:
-    """B_i (n, 4, 3) for motor angles q (n, 4)."""
-    e, f = geometry.arm_dir, np.cross(geometry.motor_axis, geometry.arm_dir)
-    L = geometry.arm_length[None, :, None]
-    return geometry.motor_pos[None] + L * (np.cos(q)[..., None] * e[None] + np.sin(q)[..., None] * f[None])
 
 
 def _ik(geometry: H4Geometry, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -251,8 +251,6 @@ class H4Geometry:
         universal joint is singular only at |b| = 90 deg, a rod turned square to its assembled direction."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         x = np.atleast_2d(np.asarray(x, dtype=float))
-        from sim.kinematics import arm_tips, nacelle_points
-
         w = nacelle_points(self, x)[0] - arm_tips(self, q)  # (n, 4, 3) world
         w = np.einsum("iba,nib->nia", self.arm_rot0, w)  # arm frame at q = 0
         k = self.motor_axis_local[None]
@@ -266,3 +264,22 @@ class H4Geometry:
         """Nacelle pose x (n, 4) read from MuJoCo qpos (n, nq)."""
         qpos = np.asarray(qpos, dtype=float)
         return self.nacelle_origin0 + (qpos[..., self.qpos_nacelle] - self.nacelle_qpos0)
+
+
+def nacelle_points(geometry: H4Geometry, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A_i (n, 4, 3) and DC_i (n, 4, 3) for poses x (n, 4)."""
+    c, s = np.cos(x[:, 3])[:, None], np.sin(x[:, 3])[:, None]
+    b = geometry.bar_offset
+    dc = np.empty((x.shape[0], 4, 3))
+    dc[..., 0] = c * b[:, 0] - s * b[:, 1]  # Rz(theta) bar_offset_i
+    dc[..., 1] = s * b[:, 0] + c * b[:, 1]
+    dc[..., 2] = b[:, 2]
+    a = x[:, None, :3] + dc + geometry.attach_offset[None]
+    return a, dc
+
+
+def arm_tips(geometry: H4Geometry, q: np.ndarray) -> np.ndarray:
+    """B_i (n, 4, 3) for motor angles q (n, 4)."""
+    e, f = geometry.arm_dir, np.cross(geometry.motor_axis, geometry.arm_dir)
+    L = geometry.arm_length[None, :, None]
+    return geometry.motor_pos[None] + L * (np.cos(q)[..., None] * e[None] + np.sin(q)[..., None] * f[None])
