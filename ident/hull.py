@@ -48,6 +48,7 @@ from ident.lpsolver import LPError, add_dense_rows, check, new_highs
 __all__ = [
     "ChebyshevResult",
     "HullResult",
+    "SafeBound",
     "chebyshev",
     "interval_hull",
     "power2_scale",
@@ -65,45 +66,85 @@ def strip_bounds(y: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return down(y - bound), up(y + bound)
 
 
+class SafeBound:
+    """Neumaier-Shcherbina lower bound of ``min c^T x  s.t.  bl <= A x <= bu`` for a dual guess ``y``, to be
+    evaluated over one or more column boxes (:meth:`over`), optionally around a float point ``x0``.
+
+    A : (m, n) float; bl, bu : (m,) (may be -inf / +inf); c : (n,); y : (m,); x0 : (n,) or None.
+    Neumaier & Shcherbina (2004): for every feasible x, ``c^T x = y^T A x - r^T x`` with ``r = A^T y - c``,
+    and each term is bounded below over its box. Entries of ``y`` that would multiply an infinite row
+    bound are set to zero first (any ``y`` is allowed). ``r`` is enclosed with rigorous dot-product error
+    bounds and every product and the final sum are rounded downward. The row terms and ``r`` do not depend on
+    the box, so a second box (e.g. a box already proven to enclose the set) costs only ``n`` products.
+
+    With ``x0``: ``x = x0 + z``, ``bl - A x0 <= A z <= bu - A x0`` (``A x0`` enclosed, bounds rounded outward),
+    ``z in [xl - x0, xu - x0]`` (rounded outward) and ``c^T x = c^T x0 + c^T z`` (bounded below). The terms
+    are then of the size of the strips rather than of ``|y| |bl|``, which keeps the bound tight when the
+    strips are narrow (bounds of 1e-13 relative).
+    """
+
+    def __init__(self, A, bl, bu, c, y, x0=None) -> None:
+        A = np.asarray(A, dtype=float)
+        bl = np.asarray(bl, dtype=float)
+        bu = np.asarray(bu, dtype=float)
+        c = np.asarray(c, dtype=float)
+        y = np.array(y, dtype=float)
+        self.x0 = None if x0 is None else np.asarray(x0, dtype=float)
+        self.cx0 = 0.0
+        if self.x0 is not None:
+            if A.shape[0]:
+                alo, ahi = point_matmul(A, self.x0)
+                bl = np.where(np.isneginf(bl), -np.inf, down(bl - ahi))
+                bu = np.where(np.isposinf(bu), np.inf, up(bu - alo))
+            self.cx0 = float(sum_down(down(c * self.x0)))  # each product rounded down, then the sum
+        y[np.isneginf(bl) & (y > 0)] = 0.0  # y_i > 0 pairs with bl_i, y_i < 0 with bu_i
+        y[np.isposinf(bu) & (y < 0)] = 0.0
+        y[~np.isfinite(y)] = 0.0
+        keep = y != 0.0
+        A, bl, bu, y = A[keep], bl[keep], bu[keep], y[keep]
+        # rows: min(y bl, y bu) = y bl if y > 0 else y bu; one product, rounded down
+        self.rows = down(np.where(y > 0, y * np.where(y > 0, bl, 0.0), y * np.where(y < 0, bu, 0.0)))
+        # r = A^T y - c, enclosed
+        if A.shape[0]:
+            glo, ghi = point_matmul(A.T, y)
+        else:
+            glo = ghi = np.zeros_like(c)
+        self.rlo, self.rhi = sub(glo, ghi, c, c)
+
+    def over(self, xl, xu) -> float:
+        """The bound over the column box ``[xl, xu]`` (finite)."""
+        xl = np.asarray(xl, dtype=float)
+        xu = np.asarray(xu, dtype=float)
+        if not (np.all(np.isfinite(xl)) and np.all(np.isfinite(xu))):
+            raise ValueError("safe_lower_bound needs finite column bounds xl, xu")
+        if self.x0 is not None:
+            xl, xu = down(xl - self.x0), up(xu - self.x0)
+        # min over r in [rlo, rhi], x in [xl, xu] of -r x: bilinear, attained at a corner
+        plo, _ = mul(-self.rhi, -self.rlo, xl, xu)
+        mu = float(sum_down(np.concatenate([self.rows, plo])))
+        return mu if self.x0 is None else float(down(mu + self.cx0))
+
+
 def safe_lower_bound(A, bl, bu, xl, xu, c, y) -> float:
     """Rigorous lower bound of ``min c^T x  s.t.  bl <= A x <= bu, xl <= x <= xu`` for any dual guess ``y``.
 
     A : (m, n) float; bl, bu : (m,) (may be -inf / +inf); xl, xu : (n,) finite; c : (n,); y : (m,).
-    Neumaier & Shcherbina (2004): for every feasible x, ``c^T x = y^T A x - r^T x`` with ``r = A^T y - c``,
-    and each term is bounded below over its box. Entries of ``y`` that would multiply an infinite row
-    bound are set to zero first (any ``y`` is allowed). ``r`` is enclosed with rigorous dot-product error
-    bounds and every product and the final sum are rounded downward.
+    See :class:`SafeBound` (Neumaier & Shcherbina 2004).
     """
-    A = np.asarray(A, dtype=float)
-    bl = np.asarray(bl, dtype=float)
-    bu = np.asarray(bu, dtype=float)
-    xl = np.asarray(xl, dtype=float)
-    xu = np.asarray(xu, dtype=float)
-    c = np.asarray(c, dtype=float)
-    y = np.array(y, dtype=float)
-    if not (np.all(np.isfinite(xl)) and np.all(np.isfinite(xu))):
-        raise ValueError("safe_lower_bound needs finite column bounds xl, xu")
-    y[np.isneginf(bl) & (y > 0)] = 0.0  # y_i > 0 pairs with bl_i, y_i < 0 with bu_i
-    y[np.isposinf(bu) & (y < 0)] = 0.0
-    y[~np.isfinite(y)] = 0.0
-    keep = y != 0.0
-    A, bl, bu, y = A[keep], bl[keep], bu[keep], y[keep]
-    # rows: min(y bl, y bu) = y bl if y > 0 else y bu; one product, rounded down
-    rows = down(np.where(y > 0, y * np.where(y > 0, bl, 0.0), y * np.where(y < 0, bu, 0.0)))
-    # r = A^T y - c, enclosed
-    if A.shape[0]:
-        glo, ghi = point_matmul(A.T, y)
-    else:
-        glo = ghi = np.zeros_like(c)
-    rlo, rhi = sub(glo, ghi, c, c)
-    # min over r in [rlo, rhi], x in [xl, xu] of -r x: bilinear, attained at a corner
-    plo, _ = mul(-rhi, -rlo, xl, xu)
-    return float(sum_down(np.concatenate([rows, plo])))
+    return SafeBound(A, bl, bu, c, y).over(xl, xu)
+
+
+def shifted_safe_bound(A, bl, bu, xl, xu, c, y, x0) -> float:
+    """:func:`safe_lower_bound` evaluated around a float point ``x0`` (same guarantee, smaller rounding;
+    see :class:`SafeBound`)."""
+    return SafeBound(A, bl, bu, c, y, x0).over(xl, xu)
 
 
 def power2_scale(v: np.ndarray) -> np.ndarray:
     """Powers of two ``2^-round(log2 v)`` (1 where v is 0): multiplying by them is exact barring underflow."""
     v = np.asarray(v, dtype=float)
+    if v.size > 1 and v.ndim == 1 and v[0] > 0 and np.all(v == v[0]):  # one value (a scalar bound): one log
+        return np.full(v.shape, float(np.ldexp(1.0, -int(np.rint(np.log2(v[0]))))))
     out = np.ones_like(v)
     pos = v > 0
     out[pos] = np.ldexp(1.0, -np.rint(np.log2(v[pos])).astype(int))
@@ -157,27 +198,6 @@ _OPTIMAL = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
 _ERROR = highspy.HighsStatus.kError
 _ERROR_MODEL = highspy.HighsModelStatus.kSolveError
-
-
-def shifted_safe_bound(A, bl, bu, xl, xu, c, y, x0) -> float:
-    """:func:`safe_lower_bound` evaluated around a float point ``x0`` (same guarantee, smaller rounding).
-
-    With ``x = x0 + z``: ``bl - A x0 <= A z <= bu - A x0`` (``A x0`` enclosed, bounds rounded outward),
-    ``z in [xl - x0, xu - x0]`` (rounded outward) and ``c^T x = c^T x0 + c^T z``. The terms of the bound are
-    then of the size of the strips rather than of ``|y| |bl|``, which keeps the bound tight when the strips
-    are narrow (bounds of 1e-13 relative). ``c`` must have entries in {-1, 0, 1} on the coordinates where
-    ``x0`` is non-zero (then ``c^T x0`` is exact up to one rounded sum, bounded below here).
-    """
-    A = np.asarray(A, dtype=float)
-    x0 = np.asarray(x0, dtype=float)
-    if A.shape[0]:
-        alo, ahi = point_matmul(A, x0)
-    else:
-        alo = ahi = np.zeros(0)
-    bl2 = np.where(np.isneginf(bl), -np.inf, down(np.asarray(bl, float) - ahi))
-    bu2 = np.where(np.isposinf(bu), np.inf, up(np.asarray(bu, float) - alo))
-    mu = safe_lower_bound(A, bl2, bu2, down(np.asarray(xl, float) - x0), up(np.asarray(xu, float) - x0), c, y)
-    return float(down(mu + sum_down(np.asarray(c, float) * x0)))
 
 
 @dataclass
@@ -403,13 +423,13 @@ def interval_hull(
     upper = prior_hi.copy()
     if not infeasible:
         # the safe bounds over the prior, then once more over the box they give (it encloses the set)
+        bounds = [SafeBound(W[rows], bl[rows], bu[rows], costs[j], yd, theta0) for j, (rows, yd) in enumerate(duals)]
         for refine in (False, True):
             if refine and np.any(lower > upper):
                 break  # the set is proven empty: no box to refine over
             box_lo, box_hi = (lower.copy(), upper.copy()) if refine else (prior_lo, prior_hi)
             for j in range(n_lp):
-                rows, yd = duals[j]
-                mu = shifted_safe_bound(W[rows], bl[rows], bu[rows], box_lo, box_hi, costs[j], yd, theta0)
+                mu = bounds[j].over(box_lo, box_hi)
                 if j < p:
                     lower[j] = max(lower[j], mu)
                 else:
