@@ -324,7 +324,7 @@ def rich_friction_columns(qd, v_s: float) -> tuple[np.ndarray, tuple[str, ...]]:
     qd = np.asarray(qd, dtype=float)
     if not (isinstance(v_s, (int, float)) and math.isfinite(v_s) and v_s > 0):
         raise ValueError(f"v_s must be a finite number > 0 [rad/s], got {v_s!r}")
-    n, nj = qd.shape
+    nj = qd.shape[1]
     eye = np.eye(nj)
     a = np.abs(qd)
     blocks = [a, np.sign(qd) * np.exp(-a / v_s), qd * a]
@@ -379,7 +379,7 @@ class SerialEquation:
         raw = b[self.joint] * self.gain + self.rounding
         return np.nextafter(raw * (1.0 + 4.0 * np.finfo(float).eps), np.inf)
 
-    def subset(self, rows) -> "SerialEquation":
+    def subset(self, rows) -> SerialEquation:
         rows = np.asarray(rows)
         return SerialEquation(self.W[rows], self.y[rows], self.gain, self.rounding[rows], self.sample[rows],
                               self.joint[rows], self.names, self.window[rows], dict(self.info))
@@ -406,7 +406,12 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
     :mod:`ident.filtering` is written for 4
     joints: it is applied here to groups of 4 joints (the last padded by repetition), joint by joint as it is.
     """
-    from ident.filtering import decimation_fir, default_edge_samples, derivatives, parallel_filter
+    from ident.filtering import (
+        decimation_fir,
+        default_edge_samples,
+        derivatives,
+        parallel_filter,
+    )
 
     nj = robot.n_joints
     q = _states(q, "q", nj)

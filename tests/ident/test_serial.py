@@ -8,8 +8,8 @@ import pytest
 
 pin = pytest.importorskip("pinocchio")
 
-from ident import tx40  # noqa: E402
-from ident.serial import SerialRobot, base_parameters, process, rich_friction_columns  # noqa: E402
+from ident import tx40
+from ident.serial import SerialRobot, base_parameters, process, rich_friction_columns
 
 THREE_LINK_URDF = """<?xml version="1.0"?>
 <robot name="three">
@@ -109,7 +109,7 @@ def test_urdf_parameters_reproduce_rnea_of_the_urdf_model(tx40_robot):
 
 def test_extra_columns_match_hand_formulas(three_link):
     rng = np.random.default_rng(5)
-    q, qd, qdd = three_link.random_states(30, seed=6)
+    _, qd, qdd = three_link.random_states(30, seed=6)
     qd[3] = 0.0  # sign(0) = 0 rows too
     theta = np.zeros(three_link.n_parameters)
     theta[three_link.n_inertial:] = rng.uniform(-3, 3, three_link.n_parameters - three_link.n_inertial)
@@ -150,7 +150,7 @@ def test_tx40_base_parameters_known_groupings(tx40_robot):
     names = set(base.names)
     assert "Izz1'" in names
     assert not any(n.startswith("m") and n[1:].isdigit() for n in base.names)
-    for j in range(0, 9):
+    for j in range(9):
         assert f"{tx40_robot.names[j]}" not in names and f"{tx40_robot.names[j]}'" not in names  # link 1 but Izz1
     assert base.singular_gap > 1e6
 
