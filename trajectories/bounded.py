@@ -37,6 +37,7 @@ import highspy
 import numpy as np
 
 import ident
+from ident.lpsolver import new_highs
 from ident.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
 from trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem
 
@@ -50,11 +51,7 @@ _OPTIMAL = highspy.HighsModelStatus.kOptimal
 
 
 def _new_highs() -> highspy.Highs:
-    h = highspy.Highs()
-    h.silent()
-    h.setOptionValue("output_flag", False)
-    h.setOptionValue("presolve", "off")
-    return h
+    return new_highs(None, presolve="off")  # silent: HiGHS's banner never reaches stdout
 
 
 @dataclass(frozen=True)
