@@ -16,3 +16,6 @@ from ident.uncertain import Distortion, IntervalEquation, interval_equation, int
 
 __all__ += ["Distortion", "IntervalEquation", "OnlineHull", "OutlierBudgetError", "OutlierRows", "detect_outliers",
             "interval_equation", "interval_regressor", "relaxed_hull", "uncertain_hull"]
+from ident.lpsolver import LPError, LPFallbackWarning  # noqa: E402
+
+__all__ += ["LPError", "LPFallbackWarning"]

@@ -42,3 +42,6 @@ __all__ += [
 from sim.variants import broken_hypotheses_model, randomised_model, unbalanced_arms_model  # noqa: E402
 
 __all__ += ["broken_hypotheses_model", "randomised_model", "unbalanced_arms_model"]
+from sim.noise import ErrorStream, NoiseModelError, TorqueError, realistic_drive  # noqa: E402
+
+__all__ += ["ErrorStream", "NoiseModelError", "TorqueError", "realistic_drive"]
