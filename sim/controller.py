@@ -42,6 +42,8 @@ import control as ct
 import numpy as np
 from scipy.optimize import brentq
 
+from sim.validation import axis_array, joint_vector, positive, real
+
 __all__ = [
     "ControllerDesign",
     "JointController",
@@ -52,59 +54,6 @@ __all__ = [
 
 N_JOINTS = 4
 _TAU_MAX_DEFAULT = 15.0  # N m
-
-
-# ----------------------------------------------------------------------------------------------- validation
-
-
-def _real(x, name: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a real number, got {type(x).__name__}")
-    x = float(x)
-    if not math.isfinite(x):
-        raise ValueError(f"{name} must be finite, got {x}")
-    return x
-
-
-def _positive(x, name: str) -> float:
-    x = _real(x, name)
-    if x <= 0:
-        raise ValueError(f"{name} must be > 0, got {x}")
-    return x
-
-
-def _axis_array(x, name: str, *, allow_zero: bool) -> np.ndarray:
-    """Scalar or (4,) -> (4,) float array, > 0 (or >= 0)."""
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name} must be a number or an array of shape ({N_JOINTS},), got {type(x).__name__}")
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a number or an array of shape ({N_JOINTS},), "
-                        f"got {type(x).__name__}") from exc
-    if arr.ndim == 0:
-        arr = np.full(N_JOINTS, float(arr))
-    if arr.shape != (N_JOINTS,):
-        raise ValueError(f"{name} must be a scalar or have shape ({N_JOINTS},), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr}")
-    if np.any(arr < 0) if allow_zero else np.any(arr <= 0):
-        raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {arr}")
-    return arr
-
-
-def _joint_vector(x, name: str) -> np.ndarray:
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name} must be an array of shape ({N_JOINTS},), got {type(x).__name__}")
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be an array of shape ({N_JOINTS},), got {type(x).__name__}") from exc
-    if arr.shape != (N_JOINTS,):
-        raise ValueError(f"{name} must have shape ({N_JOINTS},), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr}")
-    return arr
 
 
 # ------------------------------------------------------------------------------------------- transfer fns
@@ -394,19 +343,19 @@ def design_joint_controller(J, Fv, bandwidth_hz: float = 20.0, dt: float = 1e-3,
     bandwidth at or above the Nyquist frequency, wrong shapes), for a phase margin that cannot be reached, or
     if the sampled loop is unstable.
     """
-    J = _axis_array(J, "J", allow_zero=False)
-    Fv = _axis_array(Fv, "Fv", allow_zero=True)
-    dt = _positive(dt, "dt")
+    J = axis_array(J, "J", allow_zero=False)
+    Fv = axis_array(Fv, "Fv", allow_zero=True)
+    dt = positive(dt, "dt")
     nyquist = 0.5 / dt
-    bandwidth_hz = _positive(bandwidth_hz, "bandwidth_hz")
+    bandwidth_hz = positive(bandwidth_hz, "bandwidth_hz")
     if bandwidth_hz >= nyquist:
         raise ValueError(f"bandwidth_hz must be below the Nyquist frequency 1/(2 dt) = {nyquist:g} Hz, "
                          f"got {bandwidth_hz:g}")
-    pm_deg = _real(phase_margin_deg, "phase_margin_deg")
+    pm_deg = real(phase_margin_deg, "phase_margin_deg")
     if not 0.0 < pm_deg < 90.0:
         raise ValueError(f"phase_margin_deg must be in (0, 90), got {pm_deg:g}")
     if velocity_filter_hz is not None:
-        velocity_filter_hz = _positive(velocity_filter_hz, "velocity_filter_hz")
+        velocity_filter_hz = positive(velocity_filter_hz, "velocity_filter_hz")
         if velocity_filter_hz >= nyquist:
             raise ValueError(f"velocity_filter_hz must be below the Nyquist frequency {nyquist:g} Hz, "
                              f"got {velocity_filter_hz:g}")
@@ -461,8 +410,8 @@ class VelocityFilter:
     """
 
     def __init__(self, dt: float = 1e-3, cutoff_hz: float = 100.0) -> None:
-        self.dt = _positive(dt, "dt")
-        self.cutoff_hz = _positive(cutoff_hz, "cutoff_hz")
+        self.dt = positive(dt, "dt")
+        self.cutoff_hz = positive(cutoff_hz, "cutoff_hz")
         if self.cutoff_hz >= 0.5 / self.dt:
             raise ValueError(f"cutoff_hz must be below the Nyquist frequency {0.5 / self.dt:g} Hz, "
                              f"got {self.cutoff_hz:g}")
@@ -473,11 +422,11 @@ class VelocityFilter:
 
     def reset(self, q0=None, qd0=None) -> None:
         """Forget the history; optionally start from angle q0 (4,) [rad] and velocity qd0 (4,) [rad/s]."""
-        self._q_prev = None if q0 is None else _joint_vector(q0, "q0").copy()
-        self._qd = np.zeros(N_JOINTS) if qd0 is None else _joint_vector(qd0, "qd0").copy()
+        self._q_prev = None if q0 is None else joint_vector(q0, "q0").copy()
+        self._qd = np.zeros(N_JOINTS) if qd0 is None else joint_vector(qd0, "qd0").copy()
 
     def __call__(self, q) -> np.ndarray:
-        return self.step(_joint_vector(q, "q")).copy()
+        return self.step(joint_vector(q, "q")).copy()
 
     def step(self, q: np.ndarray) -> np.ndarray:
         """:meth:`__call__` without input checks, for hot loops: q must be a float (4,) array. Returns the
@@ -510,12 +459,12 @@ class JointController:
     """
 
     def __init__(self, kp, kv, ki, dt: float = 1e-3, tau_max=_TAU_MAX_DEFAULT, inertia_ff=None) -> None:
-        self.kp = _axis_array(kp, "kp", allow_zero=True)
-        self.kv = _axis_array(kv, "kv", allow_zero=True)
-        self.ki = _axis_array(ki, "ki", allow_zero=True)
-        self.dt = _positive(dt, "dt")
-        self.tau_max = _axis_array(tau_max, "tau_max", allow_zero=False)
-        self.inertia_ff = None if inertia_ff is None else _axis_array(inertia_ff, "inertia_ff", allow_zero=True)
+        self.kp = axis_array(kp, "kp", allow_zero=True)
+        self.kv = axis_array(kv, "kv", allow_zero=True)
+        self.ki = axis_array(ki, "ki", allow_zero=True)
+        self.dt = positive(dt, "dt")
+        self.tau_max = axis_array(tau_max, "tau_max", allow_zero=False)
+        self.inertia_ff = None if inertia_ff is None else axis_array(inertia_ff, "inertia_ff", allow_zero=True)
         self.reset()
 
     @classmethod
@@ -534,18 +483,18 @@ class JointController:
     def __call__(self, q_ref, qd_ref, q, qd, qdd_ref=None, feedforward=None) -> np.ndarray:
         """Torque (4,) [N m] for references q_ref [rad], qd_ref [rad/s], measures q [rad], qd [rad/s],
         optional qdd_ref [rad/s^2] (needs ``inertia_ff``) and feedforward torque [N m], all (4,)."""
-        q_ref = _joint_vector(q_ref, "q_ref")
-        qd_ref = _joint_vector(qd_ref, "qd_ref")
-        q = _joint_vector(q, "q")
-        qd = _joint_vector(qd, "qd")
+        q_ref = joint_vector(q_ref, "q_ref")
+        qd_ref = joint_vector(qd_ref, "qd_ref")
+        q = joint_vector(q, "q")
+        qd = joint_vector(qd, "qd")
         ff = np.zeros(N_JOINTS)
         if qdd_ref is not None:
             if self.inertia_ff is None:
                 raise ValueError("qdd_ref was given but inertia_ff is None: pass inertia_ff to the controller "
                                  "or the feed-forward torque as feedforward")
-            ff = ff + self.inertia_ff * _joint_vector(qdd_ref, "qdd_ref")
+            ff = ff + self.inertia_ff * joint_vector(qdd_ref, "qdd_ref")
         if feedforward is not None:
-            ff = ff + _joint_vector(feedforward, "feedforward")
+            ff = ff + joint_vector(feedforward, "feedforward")
         return self.step(q_ref, qd_ref, q, qd, ff)
 
     def step(self, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray, qd: np.ndarray, ff: np.ndarray) -> np.ndarray:

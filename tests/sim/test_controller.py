@@ -192,7 +192,7 @@ def test_design_bad_inputs():
         design_joint_controller(np.ones(3), 0.1)
     with pytest.raises(ValueError, match="bandwidth_hz must be below the Nyquist frequency"):
         design_joint_controller(0.03, 0.1, bandwidth_hz=600.0)
-    with pytest.raises(ValueError, match="bandwidth_hz must be > 0"):
+    with pytest.raises(ValueError, match="bandwidth_hz must be a finite number > 0"):
         design_joint_controller(0.03, 0.1, bandwidth_hz=0.0)
     with pytest.raises(ValueError, match=r"phase_margin_deg must be in \(0, 90\)"):
         design_joint_controller(0.03, 0.1, phase_margin_deg=95.0)
