@@ -39,7 +39,7 @@ import numpy as np
 import ident
 from ident.lpsolver import new_highs
 from ident.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
-from trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem
+from trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem, grid_regressor
 
 #: Column bound of the half-width LPs: keeps every LP bounded when W is rank-deficient (then h_j = BIG).
 BIG = 1e6
@@ -223,14 +223,7 @@ class HalfwidthProblem(CoefficientProblem):
 
     def regressor(self, y) -> np.ndarray:
         """(4n, 14) the paper's regressor on the grid (rows 4k + i), true sign in the Coulomb columns."""
-        n = y.shape[0]
-        W = np.zeros((n, 4, 14))
-        eye = np.eye(4)[None]
-        W[..., 0:4] = eye * y[:, _QDD, None]
-        W[..., 4], W[..., 5] = y[:, _MNAC], y[:, _IBC]
-        W[..., 6:10] = eye * y[:, _QD, None]
-        W[..., 10:14] = eye * np.sign(y[:, _QD])[:, :, None]
-        return W.reshape(4 * n, 14)
+        return grid_regressor(y, np.sign(y[:, _QD]))
 
     def objective(self, y, dy=None):
         keep = self._rows(y)

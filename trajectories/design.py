@@ -89,6 +89,19 @@ def fast_motion(geometry, x, xd, xdd) -> dict:
             "ibc": jtv[..., 1]}
 
 
+def grid_regressor(y, coulomb) -> np.ndarray:
+    """(4n, 14) the paper's regressor on the design grid (rows 4k + i) from the grid's joint motion ``y``
+    (n, ., 4) and the Coulomb columns' values ``coulomb`` (n, 4) (the sign, or its smooth stand-in)."""
+    n = y.shape[0]
+    W = np.zeros((n, 4, 14))
+    eye = np.eye(4)[None]
+    W[..., 0:4] = eye * y[:, _QDD, None]
+    W[..., 4], W[..., 5] = y[:, _MNAC], y[:, _IBC]
+    W[..., 6:10] = eye * y[:, _QD, None]
+    W[..., 10:14] = eye * np.asarray(coulomb)[:, :, None]
+    return W.reshape(4 * n, 14)
+
+
 class CoefficientProblem:
     """Objective and constraints of the coefficient vector z on a coarse grid (see the module docstring).
 
@@ -157,14 +170,7 @@ class CoefficientProblem:
                 + th[6:10] * v[6:10] * y[:, _QD] + th[10:14] * v[10:14] * np.tanh(y[:, _QD] / SIGN_WIDTH))
 
     def _scaled_regressor(self, y):
-        n = y.shape[0]
-        W = np.zeros((n, 4, 14))
-        eye = np.eye(4)[None]
-        W[..., 0:4] = eye * y[:, _QDD, None]
-        W[..., 4], W[..., 5] = y[:, _MNAC], y[:, _IBC]
-        W[..., 6:10] = eye * y[:, _QD, None]
-        W[..., 10:14] = eye * np.tanh(y[:, _QD] / SIGN_WIDTH)[:, :, None]
-        return W.reshape(4 * n, 14) * self.theta[None]
+        return grid_regressor(y, np.tanh(y[:, _QD] / SIGN_WIDTH)) * self.theta[None]
 
     def _violations(self, y):
         """Normalised violations (n, 33) per sample (<= 0 satisfied), in CONSTRAINT_NAMES order."""
