@@ -19,3 +19,6 @@ __all__ += ["Distortion", "IntervalEquation", "OnlineHull", "OutlierBudgetError"
 from ident.lpsolver import LPError, LPFallbackWarning  # noqa: E402
 
 __all__ += ["LPError", "LPFallbackWarning"]
+from ident.serial import BaseParameters, SerialRobot, base_parameters  # noqa: E402  (pinocchio loaded on use)
+
+__all__ += ["BaseParameters", "SerialRobot", "base_parameters"]

@@ -18,7 +18,22 @@ import numpy as np
 __all__ = ["A_PRIORI", "DATA_DIR", "DT", "N_JOINTS", "RATIOS", "TX40Log", "load_log", "motor_to_joint",
            "rich_friction_prior", "robot", "standard_prior", "urdf_path"]
 
-DATA_DIR = Path(__file__).resolve().parent.parent / "data" / "tx40"
+
+
+def _data_dir() -> Path:
+    """``data/tx40`` of a source checkout, else the installed package data (``h4bench_data``, the same files)."""
+    checkout = Path(__file__).resolve().parent.parent / "data" / "tx40"
+    if checkout.is_dir():
+        return checkout
+    import importlib.util
+
+    spec = importlib.util.find_spec("h4bench_data")
+    if spec is not None and spec.submodule_search_locations:
+        return Path(next(iter(spec.submodule_search_locations))) / "tx40"
+    return checkout
+
+
+DATA_DIR = _data_dir()
 N_JOINTS = 6
 DT = 2e-4  # s: TX40_config.yaml ts, 5 kHz
 RATIOS = (32.0, 32.0, 45.0, -48.0, 45.0, 32.0)  # motor / joint, TX40_config.yaml reduction_ratio

@@ -56,15 +56,18 @@ def test_the_wheel_holds_the_models(installed):
     names = zipfile.ZipFile(wheel).namelist()
     assert "h4bench_models/h4.xml" in names and "h4bench_models/scene.xml" in names
     assert "scenarios/paper.toml" in names and "scenarios/kinds/paper.py" in names
+    assert {"h4bench_data/tx40/curr_data.csv.gz", "h4bench_data/tx40/pos_read_data.csv.gz",
+            "h4bench_data/tx40/LICENSE-Apache-2.0.txt", "h4bench_data/tx40/README.md"} <= set(names)
 
 
 def test_an_installed_wheel_runs_the_paper_scenario_from_anywhere(installed, tmp_path):
     python, purelib, _ = installed
-    where = subprocess.run([str(python), "-c", "import sim, scenarios; print(sim.__file__); "
-                            "print(sim.DEFAULT_MODEL_PATH)"], capture_output=True, text=True, cwd=tmp_path, check=True,
-                           env=CLEAN_ENV)
-    sim_file, model_path = where.stdout.split()
-    assert Path(sim_file).is_relative_to(purelib) and Path(model_path).is_relative_to(purelib), where.stdout
+    where = subprocess.run([str(python), "-c", "import sim, scenarios, ident.tx40; print(sim.__file__); "
+                            "print(sim.DEFAULT_MODEL_PATH); print(ident.tx40.DATA_DIR)"],
+                           capture_output=True, text=True, cwd=tmp_path, check=True, env=CLEAN_ENV)
+    sim_file, model_path, data_dir = where.stdout.split()
+    assert all(Path(p).is_relative_to(purelib) for p in (sim_file, model_path, data_dir)), where.stdout
+    assert (Path(data_dir) / "curr_data.csv.gz").is_file()
     res = subprocess.run([str(python), "-m", "scenarios.cli", "run", "paper", "--quick", "--json", "--out",
                           str(tmp_path / "paper")], capture_output=True, text=True, cwd=tmp_path, timeout=600,
                          env=CLEAN_ENV)
