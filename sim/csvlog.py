@@ -11,7 +11,7 @@ nine columns typed float64, and ``"numpy"``, numpy's C parser (``numpy.loadtxt``
 benchmark's 1M-row log (``benchmarks/bench_csvlog.py``) arrow is several times faster; both give the same
 arrays (both round decimal text correctly to the nearest binary64).
 
-Errors are :class:`sim.dataset.DatasetError` (a ValueError) naming the file, and where it applies the column
+Errors are :class:`DatasetError` (a ValueError, also ``sim.DatasetError``) naming the file, and where it applies the column
 and the data row (1-based, the header excluded; blank lines are skipped and not counted). A parser failure
 (rows of unequal length, a non-numeric value) is located by a second, plain-Python pass over the file, so the
 fast path carries no per-row bookkeeping.
@@ -33,9 +33,11 @@ _ARROW_BLOCK_BYTES = 1 << 20  # pyarrow's parser block (~6000 rows): faster than
 _NUMPY_BLOCK_ROWS = 200_000
 
 
-def _error(message: str):
-    from sim.dataset import DatasetError
+class DatasetError(ValueError):
+    """A dataset or log file is malformed (missing columns, NaN, non-monotonic time, wrong shapes)."""
 
+
+def _error(message: str):
     return DatasetError(message)
 
 
@@ -166,8 +168,6 @@ def read_log(path, delimiter: str = ",", engine: str = "arrow") -> tuple[np.ndar
             tau[n:n + m] = np.column_stack(cols[1 + N_JOINTS:])
             n += m
     except ValueError as exc:
-        from sim.dataset import DatasetError
-
         if isinstance(exc, DatasetError):
             raise
         where = _locate_bad_row(path, delimiter, header)

@@ -18,9 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-class DatasetError(ValueError):
-    """A dataset or log file is malformed (missing columns, NaN, non-monotonic time, wrong shapes)."""
+from sim.csvlog import DatasetError, read_log  # DatasetError lives with the reader (the lower module)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
@@ -141,8 +139,6 @@ class Dataset:
         """Import a robot log with a header row and columns ``t, q1..q4, tau1..tau4`` (SI units; extra
         columns are ignored), in bounded memory (:func:`sim.csvlog.read_log`). Errors name the file, the
         column or the sample."""
-        from sim.csvlog import read_log
-
         t, q, tau = read_log(path, delimiter)
         return cls(t, q, tau, {"source": "csv", "path": str(path)})
 
