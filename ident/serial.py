@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters"]
+__all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters", "default_reach", "physical_prior"]
 
 INERTIAL_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")  # pinocchio's order
 _INERTIAL_UNITS = ("kg", "kg m", "kg m", "kg m") + ("kg m^2",) * 6
@@ -314,6 +314,92 @@ class SerialRobot:
         q, qd, qdd = self.random_states(int(n_samples), seed)
         return base_parameters(self.regressor(q, qd, qdd), self.names, self.units, tol=tol)
 
+
+
+# ------------------------------------------------------------------------------------------------- prior
+def physical_prior(robot: SerialRobot, total_mass: float, reach: float, *, rotor_inertia_max: float | None = None,
+                   ratios=None, offset_fraction: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+    """A physically meaningful, wide prior box on a serial robot's standard parameters: (lower (p,), upper (p,)).
+
+    total_mass M [kg] bounds every link's mass, reach r [m] the distance of any of its points from its joint
+    origin. Every link: ``0 <= m_i <= M``; its centre of mass lies within r of its joint origin, so ``|m c| <=
+    M r``; the inertia about the joint origin of a body within radius r obeys ``0 <= I_aa <= M r^2`` and
+    ``|I_ab| <= M r^2 / 2`` (``|ab| <= (a^2 + b^2)/2``). Joint i, with the URDF's effort limit ``E_i`` [N m]
+    and velocity limit ``V_i`` [rad/s]: Coulomb ``0 <= fs_i <= E_i``, viscous ``0 <= fv_i <= E_i / V_i``
+    (friction cannot exceed what the drive delivers at full speed), rotor inertia reflected to the joint
+    ``0 <= Ia_i <= J k_i^2`` with J = ``rotor_inertia_max`` [kg m^2] (motor side) and ``k_i = |ratios[i]|``
+    (reduction ratio; ``ratios=None``: all 1, J is then a joint-side bound; ``rotor_inertia_max=None``: J =
+    ``M r^2``, the links' own inertia bound), offset ``|off_i| <= offset_fraction E_i`` (a larger
+    current-sensor offset would be a drive fault). Coupled wrist motor of joint b: ``Iam <= J k_b^2``,
+    ``fvm <= E_b / V_b``, ``fsm <= E_b``. Wide on purpose: it only excludes the unphysical.
+    Raises ValueError for non-positive M, r, J, a negative offset_fraction, ratios of the wrong length or
+    non-positive effort or velocity limits a friction or offset bound needs.
+    """
+    M = _positive(total_mass, "total_mass")
+    r = _positive(reach, "reach")
+    J = M * r * r if rotor_inertia_max is None else _positive(rotor_inertia_max, "rotor_inertia_max")
+    frac = float(offset_fraction)
+    if not (math.isfinite(frac) and frac >= 0):
+        raise ValueError(f"offset_fraction must be a finite number >= 0, got {offset_fraction!r}")
+    nj = robot.n_joints
+    k = np.ones(nj) if ratios is None else np.abs(np.asarray(ratios, dtype=float))
+    if k.shape != (nj,) or not np.all(np.isfinite(k)) or np.any(k == 0):
+        raise ValueError(f"ratios must be None or {nj} finite non-zero numbers, got {ratios!r}")
+    effort = np.asarray(robot.model.effortLimit, dtype=float)
+    vmax = np.asarray(robot.model.velocityLimit, dtype=float)
+    p = robot.n_parameters
+    lo, hi = np.zeros(p), np.zeros(p)
+    mr, mr2 = M * r, M * r * r
+    inertial = {"m": (0.0, M), "mx": (-mr, mr), "my": (-mr, mr), "mz": (-mr, mr),
+                "Ixx": (0.0, mr2), "Iyy": (0.0, mr2), "Izz": (0.0, mr2),
+                "Ixy": (-mr2 / 2, mr2 / 2), "Ixz": (-mr2 / 2, mr2 / 2), "Iyz": (-mr2 / 2, mr2 / 2)}
+
+    def limit(i, what, name):
+        e = effort[i]
+        v = vmax[i]
+        if not (math.isfinite(e) and e > 0) or (what == "viscous" and not (math.isfinite(v) and v > 0)):
+            raise ValueError(f"robot's URDF must give joint {i + 1} a positive finite effort (and velocity) limit "
+                             f"for the {name} bound, got effort = {e!r}, velocity = {v!r}")
+        return e / v if what == "viscous" else e
+
+    for j, name in enumerate(robot.names):
+        prefix = name.rstrip("0123456789")
+        i = int(name[len(prefix):]) - 1
+        if prefix in inertial:
+            lo[j], hi[j] = inertial[prefix]
+        elif prefix in ("fv", "fvm"):
+            hi[j] = limit(i, "viscous", name)
+        elif prefix in ("fs", "fsm"):
+            hi[j] = limit(i, "coulomb", name)
+        elif prefix in ("Ia", "Iam"):
+            hi[j] = J * k[i] ** 2
+        elif prefix == "off":
+            e = limit(i, "coulomb", name)
+            lo[j], hi[j] = -frac * e, frac * e
+        else:
+            raise ValueError(f"robot has a parameter {name!r} the physical prior does not know")
+    return lo, hi
+
+
+def _positive(x, name: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a number > 0, got {x!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a finite number > 0, got {x!r}")
+    return v
+
+
+def default_reach(robot: SerialRobot) -> float:
+    """A reach bound [m] from the URDF alone: the sum of the joint-origin offsets (``|t|`` of every joint's
+    placement in its parent, joint 1's from the base included) plus the distance of the last link's centre of
+    mass from its joint origin. At any configuration every link's joint origin and centre of mass are within
+    this distance of any other joint origin along the chain (triangle inequality over the segments)."""
+    model = robot.model
+    segments = sum(float(np.linalg.norm(model.jointPlacements[i].translation)) for i in range(1, model.njoints))
+    last = float(np.linalg.norm(model.inertias[model.njoints - 1].lever))
+    return segments + last
 
 # ---------------------------------------------------------------------------------------------- processing
 def rich_friction_columns(qd, v_s: float) -> tuple[np.ndarray, tuple[str, ...]]:

@@ -150,40 +150,13 @@ def standard_prior(robot) -> tuple[np.ndarray, np.ndarray]:
     drive delivers at full speed), rotor inertia ``0 <= Ia_i <= J r_i^2`` with ``J = 2e-3 kg m^2`` (about six
     times the example's a-priori rotor of joint 1) and ``r_i`` the reduction ratio, offset ``|off_i| <= 0.2
     E_i`` (a larger current-sensor offset would be a drive fault). Coupled wrist: ``Iam <= J 32^2``, ``fvm <=
-    E_6 / V_6``, ``fsm <= E_6``. Wide on purpose: it only excludes the unphysical.
+    E_6 / V_6``, ``fsm <= E_6``. Wide on purpose: it only excludes the unphysical. This is
+    :func:`ident.serial.physical_prior` with M, r, J, the ratios and the offset fraction 0.2 above.
     """
-    p = robot.n_parameters
-    lo, hi = np.zeros(p), np.zeros(p)
-    M, r = ARM_MASS, REACH
-    off = {"m": (0.0, M), "mx": (-M * r, M * r), "my": (-M * r, M * r), "mz": (-M * r, M * r),
-           "Ixx": (0.0, M * r * r), "Iyy": (0.0, M * r * r), "Izz": (0.0, M * r * r),
-           "Ixy": (-M * r * r / 2, M * r * r / 2), "Ixz": (-M * r * r / 2, M * r * r / 2),
-           "Iyz": (-M * r * r / 2, M * r * r / 2)}
-    effort = np.asarray(robot.model.effortLimit, dtype=float)
-    vmax = np.asarray(robot.model.velocityLimit, dtype=float)
-    ratios = np.abs(np.asarray(RATIOS))
-    for j, name in enumerate(robot.names):
-        prefix = name.rstrip("0123456789")
-        i = int(name[len(prefix):]) - 1
-        if prefix in off:
-            lo[j], hi[j] = off[prefix]
-        elif prefix == "fv":
-            hi[j] = effort[i] / vmax[i]
-        elif prefix == "fs":
-            hi[j] = effort[i]
-        elif prefix == "Ia":
-            hi[j] = MOTOR_INERTIA_MAX * ratios[i] ** 2
-        elif prefix == "off":
-            lo[j], hi[j] = -0.2 * effort[i], 0.2 * effort[i]
-        elif prefix == "Iam":
-            hi[j] = MOTOR_INERTIA_MAX * ratios[i] ** 2
-        elif prefix == "fvm":
-            hi[j] = effort[i] / vmax[i]
-        elif prefix == "fsm":
-            hi[j] = effort[i]
-        else:
-            raise ValueError(f"robot has a parameter {name!r} the TX40 prior does not know")
-    return lo, hi
+    from ident.serial import physical_prior
+
+    return physical_prior(robot, ARM_MASS, REACH, rotor_inertia_max=MOTOR_INERTIA_MAX, ratios=RATIOS,
+                          offset_fraction=0.2)
 
 
 def rich_friction_prior(robot) -> tuple[np.ndarray, np.ndarray]:

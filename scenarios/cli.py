@@ -223,9 +223,20 @@ def scenarios() -> None:
 
 @app.command()
 def identify(
-    file: Path = typer.Argument(..., help="CSV log: header t,q1..q4,tau1..tau4 (SI units)"),
+    file: Path = typer.Argument(..., help="CSV log: header t,q1..q4,tau1..tau4 (SI units; with --urdf "
+                                "t,q1..qn,tau1..taun, joint side)"),
     bound: str = typer.Option(..., help="bound on |tau - W theta| for every raw sample [N m]: one number, "
-                              "4 comma-separated numbers (joints 1..4) or a .toml/.csv file (README)"),
+                              "4 (n) comma-separated numbers (joints 1..4 (n)) or, H4 only, a .toml/.csv file"),
+    urdf: Optional[Path] = typer.Option(None, help="a serial robot's URDF: identify its base parameters in a "
+                                        "physical prior (--mass, --reach) instead of the H4's 14"),
+    mass: Optional[str] = typer.Option(None, help="--urdf: total mass of the prior [kg] (default 2 x the URDF's)"),
+    reach: Optional[str] = typer.Option(None, help="--urdf: reach of the prior [m] (default: the sum of the "
+                                        "joint-origin offsets + the last link's centre-of-mass distance)"),
+    friction: bool = typer.Option(True, "--friction/--no-friction", help="--urdf: viscous and Coulomb friction"),
+    rotor: bool = typer.Option(True, "--rotor/--no-rotor", help="--urdf: rotor inertia per joint"),
+    offset: bool = typer.Option(True, "--offset/--no-offset", help="--urdf: torque offset per joint"),
+    cutoff_hz: str = typer.Option("100", help="--urdf: Butterworth cut-off on q [Hz]"),
+    decimation: str = typer.Option("100", help="--urdf: decimation factor of the parallel filter"),
     method: str = typer.Option("hull", help="hull | cgsp | wls"),
     prior: Optional[Path] = typer.Option(None, help="per-parameter prior: .toml ([Imot1] lower = .. upper = ..) "
                                          "or .csv (name,lower,upper); unnamed parameters keep the pair below"),
@@ -242,29 +253,76 @@ def identify(
     2 bad option, file or data (one error line on stderr);
     3 the data are proven inconsistent with the bound (result.json still written, with the smallest consistent bound).
     """
-    from scenarios.identify import (EXIT_INCONSISTENT, METHODS, OptionError, identify_csv, load_prior, parse_bound,
-                                    parse_number)
+    from scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError
 
     try:
         if method not in METHODS:
             raise OptionError(f"--method must be one of {' | '.join(METHODS)}, got {method!r}")
-        bounds = parse_bound(bound)
-        lo, hi = parse_number(prior_lower, "--prior-lower"), parse_number(prior_upper, "--prior-upper")
-        if not lo < hi:
-            raise OptionError(f"--prior-lower must be < --prior-upper, got {lo:g} and {hi:g}")
-        box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
-        result = identify_csv(file, bounds, method=method, prior=box, model=model, out=out)
+        if urdf is not None:
+            result = _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, cutoff_hz,
+                                    decimation, prior, model, out)
+        else:
+            for name, value in (("--mass", mass), ("--reach", reach)):
+                if value is not None:
+                    raise OptionError(f"{name} needs --urdf (the H4's prior is --prior), got {name} {value}")
+            result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out)
     except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))
     if as_json:
         typer.echo(json.dumps(result, indent=2, default=str))
     else:
         _print_summary(result)
+        if result.get("parameter_expressions"):
+            import textwrap
+
+            typer.echo(f"min consistent bound / ||h||_1 (raw rows, approximate): "
+                       f"{result['min_consistent_bound_raw']:.4g} N m")
+            typer.echo("base parameters (base <- standard):")
+            for n, e in zip(result["parameters"], result["parameter_expressions"]):
+                typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
     if result.get("consistent") is False:
         failed = next(m for m in result["methods"].values() if m.get("status") != "ok")
         typer.secho(f"error: the data are inconsistent with the bound (proven); the smallest consistent bound "
                     f"is {failed['min_bound']:.6g} N m", fg=typer.colors.RED, err=True)
         raise typer.Exit(EXIT_INCONSISTENT)
+
+
+def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, cutoff_hz, decimation, prior,
+                   model, out) -> dict:
+    from scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
+
+    for name, value in (("--prior", prior), ("--model", model)):
+        if value is not None:
+            raise OptionError(f"{name} is for the H4; with --urdf the prior is physical (--mass, --reach), got "
+                              f"{name} {value}")
+    if not Path(urdf).is_file():
+        raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
+    from ident.serial import SerialRobot
+
+    try:
+        n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints
+    except (ValueError, RuntimeError) as exc:
+        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}") from None
+    dec = parse_number(decimation, "--decimation", positive=True)
+    if dec != int(dec):
+        raise OptionError(f"--decimation must be an integer >= 1, got {decimation!r}")
+    return identify_urdf_csv(
+        file, urdf, parse_joint_bound(bound, n), method,
+        mass=None if mass is None else parse_number(mass, "--mass", positive=True),
+        reach=None if reach is None else parse_number(reach, "--reach", positive=True),
+        friction=friction, rotor_inertia=rotor, offset=offset,
+        cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out)
+
+
+def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out) -> dict:
+    from scenarios.identify import OptionError, identify_csv, load_prior, parse_bound, parse_number
+
+    bounds = parse_bound(bound)
+    lo, hi = parse_number(prior_lower, "--prior-lower"), parse_number(prior_upper, "--prior-upper")
+    if not lo < hi:
+        raise OptionError(f"--prior-lower must be < --prior-upper, got {lo:g} and {hi:g}")
+    box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
+    return identify_csv(file, bounds, method=method, prior=box, model=model, out=out)
 
 
 @app.command()

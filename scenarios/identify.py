@@ -238,3 +238,157 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         write_json(tmp / "result.json", result)
     return result
+
+
+# ------------------------------------------------------------------------------- any serial robot (URDF)
+
+# Processing of a serial robot's log: the tx40 scenario's defaults (scenarios/kinds/tx40.py), for logs sampled at
+# about 1-10 kHz: zero-phase Butterworth (order 4) on q at cutoff_hz, central differences, the base regressor,
+# rows slower than speed_threshold [rad/s] dropped (sign(qd) not trusted), a Hamming FIR of
+# numtaps_per_decimation x decimation + 1 taps with its -6 dB point at fir_cutoff x the decimated Nyquist
+# frequency, decimation; base parameters from base_samples random states (seed).
+URDF_PROCESSING = {"cutoff_hz": 100.0, "butter_order": 4, "decimation": 100, "numtaps_per_decimation": 4,
+                   "fir_cutoff": 0.8, "speed_threshold": 0.05, "base_samples": 200, "seed": 0}
+MASS_FACTOR = 2.0  # default total mass of the prior: the URDF's total mass times this
+OFFSET_FRACTION = 0.2  # |off_i| <= this x the URDF effort limit
+
+
+def parse_joint_bound(text, n_joints: int) -> np.ndarray:
+    """``--bound`` of an n-joint robot: ``1.5`` or ``b1,..,bn`` -> (n,) [N m], each > 0; OptionError names it."""
+    text = str(text).strip()
+    parts = text.split(",")
+    if len(parts) not in (1, n_joints):
+        raise OptionError(f"--bound must be one number or {n_joints} comma-separated numbers (joints 1..{n_joints}) "
+                          f"[N m], got {text!r} ({len(parts)} values)")
+    if len(parts) == 1:
+        return np.full(n_joints, parse_number(text, "--bound", positive=True))
+    return np.array([parse_number(p.strip(), f"--bound (joint {i + 1})", positive=True) for i, p in enumerate(parts)])
+
+
+def read_serial_log(path, n_joints: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """CSV ``t, q1..qn, tau1..taun`` (joint side, SI; other columns ignored) -> q (N, n) [rad], tau (N, n)
+    [N m], dt [s] (the mean step, to 12 significant digits). The time must increase uniformly (each step
+    within 0.1 % of the median step). Errors are
+    :class:`sim.DatasetError` naming the file, the column and the data row."""
+    from sim.csvlog import read_log
+
+    DatasetError = sim.DatasetError
+
+    t, q, tau = read_log(path, n_joints=n_joints)
+    if t.size < 3:
+        raise DatasetError(f"CSV {str(path)!r} must have at least 3 data rows, got {t.size}")
+    steps = np.diff(t)
+    dt = float(np.median(steps))
+    if dt > 0:  # text time stamps: the mean step to 12 significant digits (k 2e-4 s gives 2e-4 exactly, not 2e-4 - 1 ulp)
+        dt = float(f"{(t[-1] - t[0]) / (t.size - 1):.12g}")
+    bad = np.flatnonzero(~(np.abs(steps - dt) <= 1e-3 * dt)) if dt > 0 else np.array([0])
+    if bad.size:
+        k = int(bad[0])
+        raise DatasetError(f"CSV {str(path)!r}: column t must increase uniformly (step {dt:g} s), got the step "
+                           f"{steps[k]:g} s between data rows {k + 1} and {k + 2}")
+    return q, tau, dt
+
+
+def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | None = None,
+                      reach: float | None = None, friction: bool = True, rotor_inertia: bool = True,
+                      offset: bool = True, rotor_inertia_max: float | None = None,
+                      cutoff_hz: float = URDF_PROCESSING["cutoff_hz"],
+                      decimation: int = URDF_PROCESSING["decimation"], out=None) -> dict:
+    """Identify a serial robot's base parameters from a joint-side CSV log; write ``result.json`` in ``out``.
+
+    urdf : the robot (:class:`ident.serial.SerialRobot`, n actuated joints; friction, rotor_inertia, offset
+    select its extra columns); path : CSV ``t, q1..qn, tau1..taun`` (:func:`read_serial_log`); bound : raw-row
+    bound on ``|tau - W theta|`` [N m], one number or (n,) per joint; method : hull | cgsp | wls.
+    Prior: :func:`ident.serial.physical_prior` with total mass ``mass`` [kg] (default the URDF's total mass
+    times :data:`MASS_FACTOR`), ``reach`` [m] (default :func:`ident.serial.default_reach`: the sum of the
+    joint-origin offsets plus the last link's centre-of-mass distance), ``rotor_inertia_max`` [kg m^2]
+    (joint side; default M r^2) and offsets within :data:`OFFSET_FRACTION` x the effort limit, mapped exactly to
+    the base parameters (``BaseParameters.box_from_standard``). Processing: :data:`URDF_PROCESSING` with
+    ``cutoff_hz`` [Hz] and ``decimation``. Returns the result dict; data proven inconsistent with the bound give
+    ``result["consistent"] = False`` (and the method's ``min_bound``), not an exception.
+    """
+    from ident.serial import SerialRobot, default_reach, physical_prior, process
+
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    urdf = Path(urdf)
+    if not urdf.is_file():
+        raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
+    try:
+        robot = SerialRobot(urdf, friction=friction, rotor_inertia=rotor_inertia, offset=offset)
+    except (ValueError, RuntimeError) as exc:
+        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}") from None
+    nj = robot.n_joints
+    b = np.asarray(bound, dtype=float)
+    b = np.full(nj, float(b)) if b.ndim == 0 else b
+    if b.shape != (nj,) or not np.all(np.isfinite(b) & (b > 0)):
+        raise OptionError(f"--bound must be one number or {nj} numbers > 0 (one per joint of {urdf.name}) [N m], "
+                          f"got {np.asarray(bound).tolist()!r}")
+    cutoff_hz = parse_number(cutoff_hz, "--cutoff-hz", positive=True)
+    if isinstance(decimation, bool) or int(decimation) != decimation or decimation < 1:
+        raise OptionError(f"--decimation must be an integer >= 1, got {decimation!r}")
+    decimation = int(decimation)
+    import pinocchio  # present: SerialRobot was built
+
+    urdf_mass = float(pinocchio.computeTotalMass(robot.model))
+    M = MASS_FACTOR * urdf_mass if mass is None else parse_number(mass, "--mass", positive=True)
+    r = default_reach(robot) if reach is None else parse_number(reach, "--reach", positive=True)
+    if not M > 0:
+        raise OptionError(f"--mass must be given when the URDF's total mass is 0, got the URDF mass {urdf_mass:g} kg")
+    out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
+    q, tau, dt = read_serial_log(path, nj)
+    p = URDF_PROCESSING
+    base = robot.base(int(p["base_samples"]), int(p["seed"]))
+    lo_s, hi_s = physical_prior(robot, M, r, rotor_inertia_max=rotor_inertia_max, offset_fraction=OFFSET_FRACTION)
+    blo, bhi = base.box_from_standard(lo_s, hi_s)
+    prior = ident.Box(blo, bhi, names=base.names)
+    settings = {"cutoff_hz": cutoff_hz, "decimation": decimation,
+                "numtaps": int(p["numtaps_per_decimation"]) * decimation + 1, "fir_cutoff": p["fir_cutoff"],
+                "speed_threshold": p["speed_threshold"], "butter_order": p["butter_order"]}
+    eq = process(robot, base, q, tau, dt, theta_abs_max=np.maximum(np.abs(blo), np.abs(bhi)), **settings)
+    if len(eq) == 0:
+        raise sim.DatasetError(f"CSV {str(path)!r} gives no processed row (too short, or too slow: rows below "
+                               f"{p['speed_threshold']} rad/s are dropped)")
+    rows_bound = eq.bound(b)
+    uniform = bool(np.all(b == b[0]))
+    t_min = float(ident.min_consistent_bound(eq.W, eq.y, prior))
+    result = {
+        "scenario": f"identify-{Path(path).stem}", "kind": "identify", "seed": int(p["seed"]), "robot": str(urdf),
+        "source": str(path), "samples": int(q.shape[0]), "dt": dt, "joints": list(robot.joint_names),
+        "parameters": list(base.names), "parameter_expressions": list(base.expressions),
+        "parameter_units": list(base.units), "standard_parameters": list(robot.names), "true": None,
+        "bound": float(b[0]) if uniform else b.tolist(), "bound_processed": float(rows_bound.max()), "rows": len(eq),
+        "processing": {**settings, "seed": int(p["seed"]), "base_samples": int(p["base_samples"]),
+                       "filter_l1_norm": eq.gain,
+                       **{k: v for k, v in eq.info.items() if isinstance(v, (int, float, bool))}},
+        "oracle_residual": None, "consistent": None,
+        "prior": {"lower": blo.tolist(), "upper": bhi.tolist(), "standard_lower": lo_s.tolist(),
+                  "standard_upper": hi_s.tolist(), "total_mass": M, "urdf_mass": urdf_mass, "reach": r,
+                  "rotor_inertia_max": rotor_inertia_max, "offset_fraction": OFFSET_FRACTION,
+                  "source": "ident.serial.physical_prior mapped by the base-parameter matrix"},
+        # processed rows [N m]; divided by ||h||_1: the raw-row scalar bound it corresponds to (approximately)
+        "min_consistent_bound": t_min, "min_consistent_bound_raw": t_min / eq.gain,
+        "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,
+                            "singular_gap": base.singular_gap},
+        "methods": {},
+    }
+    if method == "wls":
+        w = ident.wls(eq.W, eq.y, joints=nj, names=base.names, joint_of_row=eq.joint)
+        result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
+                         "rel_std_percent": np.asarray(w.rel_std_percent).tolist()}
+    else:
+        t0 = time.perf_counter()
+        try:
+            box = ident.estimate(eq.W, eq.y, rows_bound, prior, method=method)
+            result["methods"][method] = {"status": "ok", "lower": box.lower.tolist(), "upper": box.upper.tolist(),
+                                         "enclosed": None, "width": box.width.tolist(),
+                                         "seconds": time.perf_counter() - t0}
+            result["consistent"] = True
+        except ident.InconsistentDataError as exc:
+            result["methods"][method] = {"status": "failed", "error": "InconsistentDataError", "message": str(exc),
+                                         "min_bound": exc.min_bound, "scale_lower": exc.scale_lower,
+                                         "seconds": time.perf_counter() - t0}
+            result["consistent"] = False
+    with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
+        write_json(tmp / "result.json", result)
+    return result

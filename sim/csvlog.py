@@ -41,19 +41,24 @@ def _error(message: str):
     return DatasetError(message)
 
 
-def _header(path: Path, delimiter: str) -> list[str]:
+def columns(n_joints: int = N_JOINTS) -> tuple[str, ...]:
+    """The needed columns ``t, q1..qn, tau1..taun`` of an n-joint log."""
+    return ("t",) + tuple(f"q{i}" for i in range(1, n_joints + 1)) + tuple(f"tau{i}" for i in range(1, n_joints + 1))
+
+
+def _header(path: Path, delimiter: str, names: tuple[str, ...] = COLUMNS) -> list[str]:
     with path.open(newline="") as fh:
         first = fh.readline()
     if not first.strip():
-        raise _error(f"CSV {str(path)!r} must start with a header row naming the columns {list(COLUMNS)}, "
+        raise _error(f"CSV {str(path)!r} must start with a header row naming the columns {list(names)}, "
                      f"got an empty first line")
     header = [h.strip() for h in next(csv.reader([first], delimiter=delimiter))]
-    missing = [c for c in COLUMNS if c not in header]
+    missing = [c for c in names if c not in header]
     if missing:
-        raise _error(f"CSV {str(path)!r} must have columns {list(COLUMNS)}, missing {missing} (header: {header})")
-    dup = sorted({c for c in COLUMNS if header.count(c) > 1})
+        raise _error(f"CSV {str(path)!r} must have columns {list(names)}, missing {missing} (header: {header})")
+    dup = sorted({c for c in names if header.count(c) > 1})
     if dup:
-        raise _error(f"CSV {str(path)!r} must name each of the columns {list(COLUMNS)} once, got {dup} repeated "
+        raise _error(f"CSV {str(path)!r} must name each of the columns {list(names)} once, got {dup} repeated "
                      f"(header: {header})")
     return header
 
@@ -69,9 +74,9 @@ def _count_lines(path: Path) -> int:
     return count + (last != b"\n")
 
 
-def _locate_bad_row(path: Path, delimiter: str, header: list[str]) -> str | None:
+def _locate_bad_row(path: Path, delimiter: str, header: list[str], names: tuple[str, ...] = COLUMNS) -> str | None:
     """Plain-Python pass: the first data row with a wrong value count or a non-numeric needed value."""
-    idx = {c: header.index(c) for c in COLUMNS}
+    idx = {c: header.index(c) for c in names}
     with path.open(newline="") as fh:
         reader = csv.reader(fh, delimiter=delimiter)
         next(reader, None)
@@ -96,12 +101,12 @@ def _check_block(path: Path, name: str, values: np.ndarray, first_row: int) -> N
     bad = ~np.isfinite(values)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        group = name.rstrip("1234")
+        group = name.rstrip("0123456789")
         what = "NaN/empty value" if np.isnan(values[k]) else f"the non-finite value {values[k]}"
         raise _error(f"CSV {str(path)!r}: column {group} has {what} at data row {first_row + k + 1} ({name})")
 
 
-def _arrow_blocks(path: Path, delimiter: str, header: list[str]):
+def _arrow_blocks(path: Path, delimiter: str, header: list[str], names: tuple[str, ...] = COLUMNS):
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
@@ -109,16 +114,16 @@ def _arrow_blocks(path: Path, delimiter: str, header: list[str]):
         path,
         read_options=pacsv.ReadOptions(column_names=header, skip_rows=1, block_size=_ARROW_BLOCK_BYTES),
         parse_options=pacsv.ParseOptions(delimiter=delimiter),
-        convert_options=pacsv.ConvertOptions(column_types={c: pa.float64() for c in COLUMNS},
-                                             include_columns=list(COLUMNS), strings_can_be_null=False),
+        convert_options=pacsv.ConvertOptions(column_types={c: pa.float64() for c in names},
+                                             include_columns=list(names), strings_can_be_null=False),
     )
     for batch in reader:
         # nulls (empty cells, "nan", "NA", ...) become NaN and are reported by _check_block
-        yield [batch.column(c).to_numpy(zero_copy_only=False) for c in COLUMNS]
+        yield [batch.column(c).to_numpy(zero_copy_only=False) for c in names]
 
 
-def _numpy_blocks(path: Path, delimiter: str, header: list[str]):
-    cols = [header.index(c) for c in COLUMNS]
+def _numpy_blocks(path: Path, delimiter: str, header: list[str], names: tuple[str, ...] = COLUMNS):
+    cols = [header.index(c) for c in names]
     with path.open(newline="") as fh:
         fh.readline()
         while True:
@@ -134,8 +139,11 @@ def _numpy_blocks(path: Path, delimiter: str, header: list[str]):
             yield [block[:, j] for j in range(len(cols))]
 
 
-def read_log(path, delimiter: str = ",", engine: str = "arrow") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read a CSV log: returns t (n,) [s], q (n, 4) [rad], tau (n, 4) [N m], float64, C-contiguous.
+def read_log(path, delimiter: str = ",", engine: str = "arrow", n_joints: int = N_JOINTS
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read a CSV log: returns t (n,) [s], q (n, nj) [rad], tau (n, nj) [N m], float64, C-contiguous.
+
+    n_joints : nj, the columns needed are ``t, q1..q<nj>, tau1..tau<nj>`` (default 4, the H4).
 
     path : the CSV file; delimiter : one character; engine : ``"arrow"`` or ``"numpy"`` (see the module
     docstring). Raises DatasetError naming the file, the column and the data row for: a missing file, missing
@@ -149,28 +157,33 @@ def read_log(path, delimiter: str = ",", engine: str = "arrow") -> tuple[np.ndar
         raise ValueError(f"delimiter must be a single character, got {delimiter!r}")
     if not path.is_file():
         raise _error(f"path must be an existing CSV file, got {str(path)!r} (not found)")
-    header = _header(path, delimiter)
+    if isinstance(n_joints, bool) or not isinstance(n_joints, (int, np.integer)) or n_joints < 1:
+        raise ValueError(f"n_joints must be an integer >= 1, got {n_joints!r}")
+    nj = int(n_joints)
+    names = columns(nj)
+    header = _header(path, delimiter, names)
     capacity = _count_lines(path)
     t = np.empty(capacity)
-    q = np.empty((capacity, N_JOINTS))
-    tau = np.empty((capacity, N_JOINTS))
-    blocks = _arrow_blocks(path, delimiter, header) if engine == "arrow" else _numpy_blocks(path, delimiter, header)
+    q = np.empty((capacity, nj))
+    tau = np.empty((capacity, nj))
+    blocks = (_arrow_blocks(path, delimiter, header, names) if engine == "arrow"
+              else _numpy_blocks(path, delimiter, header, names))
     n = 0
     try:
         for cols in blocks:
             m = cols[0].size
             if n + m > capacity:  # cannot happen (every data row ends a line); guard against a miscount
                 raise _error(f"CSV {str(path)!r}: more rows than lines ({n + m} > {capacity})")
-            for name, values in zip(COLUMNS, cols):
+            for name, values in zip(names, cols):
                 _check_block(path, name, values, n)
             t[n:n + m] = cols[0]
-            q[n:n + m] = np.column_stack(cols[1:1 + N_JOINTS])
-            tau[n:n + m] = np.column_stack(cols[1 + N_JOINTS:])
+            q[n:n + m] = np.column_stack(cols[1:1 + nj])
+            tau[n:n + m] = np.column_stack(cols[1 + nj:])
             n += m
     except ValueError as exc:
         if isinstance(exc, DatasetError):
             raise
-        where = _locate_bad_row(path, delimiter, header)
+        where = _locate_bad_row(path, delimiter, header, names)
         raise _error(f"CSV {str(path)!r}: {where or exc}") from exc
     if n == 0:
         raise _error(f"CSV {str(path)!r} must have data rows after the header, got none")
