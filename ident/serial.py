@@ -39,6 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim.validation import as_float_array, check_finite
+
 __all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters", "default_reach", "physical_prior"]
 
 INERTIAL_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")  # pinocchio's order
@@ -56,18 +58,12 @@ def _pinocchio():
 
 
 def _states(x, name: str, n_joints: int) -> np.ndarray:
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}") from exc
+    arr = as_float_array(x, name)
     if arr.ndim == 1:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != n_joints:
         raise ValueError(f"{name} must have shape (n, {n_joints}) (or ({n_joints},)), got {np.shape(x)}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(arr))} non-finite entries")
+    check_finite(arr, name)
     return arr
 
 

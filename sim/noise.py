@@ -52,6 +52,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from sim.validation import as_float_array
+
 __all__ = [
     "REALISTIC_DRIVE_SHARES",
     "Drift",
@@ -369,12 +371,7 @@ _COMPONENTS = _PRECOMPUTED + (Ripple, GainError, LogQuantisation)
 
 def _array(x, name: str, shape: tuple) -> np.ndarray:
     """A finite float array of the given shape, or a clear error (also the slow path of ``ErrorStream.at``)."""
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}") from exc
+    arr = as_float_array(x, name)
     if arr.shape != shape:
         rows = " (one row per sample time)" if len(shape) == 2 else ""
         raise NoiseModelError(f"{name} must have shape {shape}{rows}, got {arr.shape}")
