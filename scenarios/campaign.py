@@ -293,6 +293,22 @@ def throughput_lines(info: dict) -> list[str]:
             f"{info['seconds']:.4g} s on {where})"]
 
 
+def summarise(spec: dict, seed: int, runs: list[dict], info: dict) -> dict:
+    """A campaign's result: the DESIGN keys over all runs (worst min consistent bound and oracle residual), how
+    many runs the bound covered, the per-method summary and the engine's ``info``."""
+    first = runs[0]
+    return {
+        "scenario": spec["name"], "kind": spec["kind"], "seed": seed, "quick": spec.get("quick_applied", False),
+        "model": first["model"], "parameters": first["parameters"], "true": first["true"],
+        "bound": first["bound"], "runs": len(runs),
+        "min_consistent_bound": float(max(r["min_consistent_bound"] for r in runs)),
+        "oracle_residual": float(max(r["oracle_residual"] for r in runs)),
+        "runs_bound_covers_residual": int(sum(r["bound_covers_residual"] for r in runs)),
+        "noise_shapes": spec["campaign"]["noise_shapes"], "parameter_spread": spec["campaign"]["parameter_spread"],
+        "methods": summarise_methods(runs), "campaign": info,
+    }
+
+
 def summarise_methods(runs: list[dict]) -> dict:
     """Per method over the runs: misses (and those where the bound covered the residual), failed runs,
     median and p90 relative widths (width / |true|), median seconds."""

@@ -8,8 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from scenarios import report
-from scenarios.campaign import (campaign_experiment, plot_relative_widths, run_many, summarise_methods,
-                                throughput_lines)
+from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise, throughput_lines
 from scenarios.rundir import OwnedFolder, save_run_files, write_json
 from scenarios.spec import ScenarioError
 from sim.dataset import atomic_write_bytes
@@ -52,26 +51,11 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
             write_json(tmp / "result.json", result)
         return result
     runs, info = run_many(spec, seed, out, campaign_job, progress, fresh=fresh)
-    result = summarise(spec, seed, runs)
-    result["campaign"] = info
+    result = summarise(spec, seed, runs, info)
     plot_relative_widths(result, runs, Path(out) / "widths.png")
     write_report(result, Path(out))
     write_json(Path(out) / "result.json", result)
     return result
-
-
-def summarise(spec: dict, seed: int, runs: list[dict]) -> dict:
-    first = runs[0]
-    return {
-        "scenario": spec["name"], "kind": "enclosure", "seed": seed, "quick": spec.get("quick_applied", False),
-        "model": first["model"], "parameters": first["parameters"], "true": first["true"],
-        "bound": first["bound"], "runs": len(runs),
-        "min_consistent_bound": float(max(r["min_consistent_bound"] for r in runs)),
-        "oracle_residual": float(max(r["oracle_residual"] for r in runs)),
-        "runs_bound_covers_residual": int(sum(r["bound_covers_residual"] for r in runs)),
-        "noise_shapes": spec["campaign"]["noise_shapes"], "parameter_spread": spec["campaign"]["parameter_spread"],
-        "methods": summarise_methods(runs),
-    }
 
 
 def write_report(result: dict, out: Path) -> None:

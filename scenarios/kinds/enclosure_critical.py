@@ -16,8 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ident.interval import down, point_matmul, up
-from scenarios.campaign import (campaign_experiment, plot_relative_widths, run_many, summarise_methods,
-                                throughput_lines)
+from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise, throughput_lines
 from scenarios.experiment import estimate_boxes
 from scenarios.report import relative_width_table
 from scenarios.rundir import write_json
@@ -53,18 +52,9 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
     if only is not None:
         raise ScenarioError("only is not available for enclosure-critical (rerun the ordinary campaign's index)")
     runs, info = run_many(spec, seed, out, critical_job, progress, fresh=fresh)
-    first = runs[0]
-    result = {
-        "scenario": spec["name"], "kind": spec["kind"], "seed": seed, "quick": spec.get("quick_applied", False),
-        "model": first["model"], "parameters": first["parameters"], "true": first["true"],
-        "bound": "critical (per row: its own oracle residual, rounded outward)", "runs": len(runs),
-        "critical_bound_median": float(np.median([r["critical_bound_median"] for r in runs])),
-        "min_consistent_bound": float(max(r["min_consistent_bound"] for r in runs)),
-        "oracle_residual": float(max(r["oracle_residual"] for r in runs)),
-        "runs_bound_covers_residual": int(sum(r["bound_covers_residual"] for r in runs)),
-        "noise_shapes": spec["campaign"]["noise_shapes"], "parameter_spread": spec["campaign"]["parameter_spread"],
-        "methods": summarise_methods(runs), "campaign": info,
-    }
+    result = summarise(spec, seed, runs, info)
+    result["bound"] = "critical (per row: its own oracle residual, rounded outward)"
+    result["critical_bound_median"] = float(np.median([r["critical_bound_median"] for r in runs]))
     out = Path(out)
     plot_relative_widths(result, runs, out / "widths.png")
     lines = [f"# Scenario `{result['scenario']}`: critical bounds, a test of rigour", "",
