@@ -262,9 +262,11 @@ def identify(
             result = _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, cutoff_hz,
                                     decimation, prior, model, out)
         else:
-            for name, value in (("--mass", mass), ("--reach", reach)):
+            for name, value in (("--mass", mass), ("--reach", reach), ("--cutoff-hz", cutoff_hz != "100" or None),
+                                ("--decimation", decimation != "100" or None), ("--no-friction", not friction or None),
+                                ("--no-rotor", not rotor or None), ("--no-offset", not offset or None)):
                 if value is not None:
-                    raise OptionError(f"{name} needs --urdf (the H4's prior is --prior), got {name} {value}")
+                    raise OptionError(f"{name} needs --urdf (the H4's settings are its spec's), got {name}")
             result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out)
     except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))

@@ -1,7 +1,8 @@
 """Reading a robot log (CSV) into typed arrays, in bounded memory.
 
 A log is a text file with a header row naming at least the columns ``t, q1..q4, tau1..tau4`` (SI units: s,
-rad, N m); other columns are ignored and never parsed. :func:`read_log` counts the lines once (binary scan),
+rad, N m) (``n_joints=n``: ``t, q1..qn, tau1..taun``, a serial robot's log); other columns are ignored
+and never parsed. :func:`read_log` counts the lines once (binary scan),
 allocates the (n,) time and the (n, 4) position and torque arrays, and fills them from a streaming parser, so
 the peak memory is the 72 bytes per row of the result plus one parser block (about 1 MB of text), instead
 of about 12 times the file size for a generic text reader.

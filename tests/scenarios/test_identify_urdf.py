@@ -189,3 +189,36 @@ def test_urdf_option_errors(log_csv, tmp_path):
     assert res.exit_code == 2
     _one_error(res, "--reach", "--urdf")
     assert not any((tmp_path / d).exists() for d in "abcde")
+
+
+def test_read_log_n_joints(tmp_path):
+    """sim.csvlog.read_log for 6 joints: both engines give Python's float() of the text; errors name the column
+    and the row."""
+    from sim.csvlog import DatasetError, read_log
+
+    rng = np.random.default_rng(3)
+    data = np.column_stack([np.arange(50) * 1e-3, rng.normal(size=(50, 12))])
+    path = tmp_path / "six.csv"
+    lines = ["power,extra," + _header(6)]
+    for row in data:
+        lines.append(",".join(["%.9g" % row[12], "x"] + ["%.9g" % v for v in row]))
+    path.write_text("\n".join(lines) + "\n")
+    ref = np.array([[float(f) for f in ln.split(",")[2:]] for ln in lines[1:]])
+    for engine in ("arrow", "numpy"):
+        t, q, tau = read_log(path, engine=engine, n_joints=6)
+        np.testing.assert_array_equal(np.column_stack([t, q, tau]), ref)
+    bad = lines[:]
+    fields = bad[7].split(",")
+    fields[2 + 5] = "oops"  # q5 of data row 7 (file line 8: the header is line 1)
+    bad[7] = ",".join(fields)
+    path.write_text("\n".join(bad) + "\n")
+    with pytest.raises(DatasetError, match=r"column q5 .*data row 7 \(line 8\)"):
+        read_log(path, n_joints=6)
+    with pytest.raises(ValueError, match="n_joints"):
+        read_log(path, n_joints=0)
+
+
+def test_h4_path_refuses_urdf_options(log_csv, tmp_path):
+    res = _run(log_csv[0], "--bound", "1", "--no-friction", "--out", tmp_path / "x")
+    assert res.exit_code == 2
+    _one_error(res, "--no-friction", "--urdf")
