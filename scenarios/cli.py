@@ -235,6 +235,8 @@ def identify(
     friction: bool = typer.Option(True, "--friction/--no-friction", help="--urdf: viscous and Coulomb friction"),
     rotor: bool = typer.Option(True, "--rotor/--no-rotor", help="--urdf: rotor inertia per joint"),
     offset: bool = typer.Option(True, "--offset/--no-offset", help="--urdf: torque offset per joint"),
+    coupled_wrist: Optional[str] = typer.Option(None, help="--urdf: A,B (joints 1..n): the motor of joint B also "
+                                                "turns with joint A (e.g. 5,6 on a Staubli wrist)"),
     cutoff_hz: str = typer.Option("100", help="--urdf: Butterworth cut-off on q [Hz]"),
     decimation: str = typer.Option("100", help="--urdf: decimation factor of the parallel filter"),
     method: str = typer.Option("hull", help="hull | cgsp | wls"),
@@ -259,12 +261,13 @@ def identify(
         if method not in METHODS:
             raise OptionError(f"--method must be one of {' | '.join(METHODS)}, got {method!r}")
         if urdf is not None:
-            result = _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, cutoff_hz,
-                                    decimation, prior, model, out)
+            result = _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist,
+                                    cutoff_hz, decimation, prior, model, out)
         else:
             for name, value in (("--mass", mass), ("--reach", reach), ("--cutoff-hz", cutoff_hz != "100" or None),
                                 ("--decimation", decimation != "100" or None), ("--no-friction", not friction or None),
-                                ("--no-rotor", not rotor or None), ("--no-offset", not offset or None)):
+                                ("--no-rotor", not rotor or None), ("--no-offset", not offset or None),
+                                ("--coupled-wrist", coupled_wrist)):
                 if value is not None:
                     raise OptionError(f"{name} needs --urdf (the H4's settings are its spec's), got {name}")
             result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out)
@@ -289,8 +292,8 @@ def identify(
         raise typer.Exit(EXIT_INCONSISTENT)
 
 
-def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, cutoff_hz, decimation, prior,
-                   model, out) -> dict:
+def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
+                   decimation, prior, model, out) -> dict:
     from scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
 
     for name, value in (("--prior", prior), ("--model", model)):
@@ -305,6 +308,15 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints
     except (ValueError, RuntimeError) as exc:
         raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}") from None
+    wrist = None
+    if coupled_wrist is not None:
+        parts = str(coupled_wrist).split(",")
+        try:
+            wrist = tuple(int(x) - 1 for x in parts)
+        except ValueError:
+            wrist = ()
+        if len(wrist) != 2 or wrist[0] == wrist[1] or not all(0 <= j < n for j in wrist):
+            raise OptionError(f"--coupled-wrist must be two distinct joints A,B in 1..{n}, got {coupled_wrist!r}")
     dec = parse_number(decimation, "--decimation", positive=True)
     if dec != int(dec):
         raise OptionError(f"--decimation must be an integer >= 1, got {decimation!r}")
@@ -312,7 +324,7 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         file, urdf, parse_joint_bound(bound, n), method,
         mass=None if mass is None else parse_number(mass, "--mass", positive=True),
         reach=None if reach is None else parse_number(reach, "--reach", positive=True),
-        friction=friction, rotor_inertia=rotor, offset=offset,
+        friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=wrist,
         cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out)
 
 

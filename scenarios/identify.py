@@ -291,13 +291,15 @@ def read_serial_log(path, n_joints: int) -> tuple[np.ndarray, np.ndarray, float]
 
 def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | None = None,
                       reach: float | None = None, friction: bool = True, rotor_inertia: bool = True,
-                      offset: bool = True, rotor_inertia_max: float | None = None,
+                      offset: bool = True, coupled_wrist: tuple[int, int] | None = None,
+                      rotor_inertia_max: float | None = None,
                       cutoff_hz: float = URDF_PROCESSING["cutoff_hz"],
                       decimation: int = URDF_PROCESSING["decimation"], out=None) -> dict:
     """Identify a serial robot's base parameters from a joint-side CSV log; write ``result.json`` in ``out``.
 
     urdf : the robot (:class:`ident.serial.SerialRobot`, n actuated joints; friction, rotor_inertia, offset
-    select its extra columns); path : CSV ``t, q1..qn, tau1..taun`` (:func:`read_serial_log`); bound : raw-row
+    select its extra columns; coupled_wrist : None or 0-based joints (a, b), the motor of b turning with a);
+    path : CSV ``t, q1..qn, tau1..taun`` (:func:`read_serial_log`); bound : raw-row
     bound on ``|tau - W theta|`` [N m], one number or (n,) per joint; method : hull | cgsp | wls.
     Prior: :func:`ident.serial.physical_prior` with total mass ``mass`` [kg] (default the URDF's total mass
     times :data:`MASS_FACTOR`), ``reach`` [m] (default :func:`ident.serial.default_reach`: the sum of the
@@ -315,7 +317,8 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     if not urdf.is_file():
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
     try:
-        robot = SerialRobot(urdf, friction=friction, rotor_inertia=rotor_inertia, offset=offset)
+        robot = SerialRobot(urdf, friction=friction, rotor_inertia=rotor_inertia, offset=offset,
+                            coupled_wrist=coupled_wrist)
     except (ValueError, RuntimeError) as exc:
         raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}") from None
     nj = robot.n_joints

@@ -222,3 +222,20 @@ def test_h4_path_refuses_urdf_options(log_csv, tmp_path):
     res = _run(log_csv[0], "--bound", "1", "--no-friction", "--out", tmp_path / "x")
     assert res.exit_code == 2
     _one_error(res, "--no-friction", "--urdf")
+
+
+def test_urdf_coupled_wrist(log_csv, tmp_path):
+    """--coupled-wrist 5,6 (1-based) is the TX40's wrist (ident.tx40.COUPLING, 0-based (4, 5)): the same base
+    parameters as ident.tx40.robot()'s."""
+    res = _run(log_csv[0], "--urdf", URDF, "--bound", "50", "--coupled-wrist", "5,6", "--json",
+               "--out", tmp_path / "run")
+    assert res.exit_code == 0, res.stderr
+    result = json.loads(res.stdout)
+    robot = tx40.robot()
+    assert result["standard_parameters"] == list(robot.names)
+    assert result["parameters"] == list(robot.base(URDF_PROCESSING["base_samples"], URDF_PROCESSING["seed"]).names)
+    for bad in ("5", "5,5", "0,1", "a,b"):
+        res = _run(log_csv[0], "--urdf", URDF, "--bound", "1", "--coupled-wrist", bad, "--out", tmp_path / "bad")
+        assert res.exit_code == 2, bad
+        _one_error(res, "--coupled-wrist")
+    assert not (tmp_path / "bad").exists()
