@@ -218,26 +218,7 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
         "prior": {"lower": box_prior.lower.tolist(), "upper": box_prior.upper.tolist()}, "methods": {},
     }
     result["min_consistent_bound"] = float(ident.min_consistent_bound(eq.W, eq.y, box_prior))
-    if method == "wls":
-        w = ident.wls(eq.W, eq.y, joints=N_JOINTS, names=eq.names, joint_of_row=eq.joint)
-        result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
-                         "rel_std_percent": np.asarray(w.rel_std_percent).tolist()}
-    else:
-        t0 = time.perf_counter()
-        try:
-            box = ident.estimate(eq.W, eq.y, eq.bound, box_prior, method=method)
-            result["methods"][method] = {"status": "ok", "lower": box.lower.tolist(), "upper": box.upper.tolist(),
-                                         "enclosed": None, "width": box.width.tolist(),
-                                         "seconds": time.perf_counter() - t0}
-            result["consistent"] = True
-        except ident.InconsistentDataError as exc:
-            result["methods"][method] = {"status": "failed", "error": "InconsistentDataError", "message": str(exc),
-                                         "min_bound": exc.min_bound, "scale_lower": exc.scale_lower,
-                                         "seconds": time.perf_counter() - t0}
-            result["consistent"] = False
-    with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
-        write_json(tmp / "result.json", result)
-    return result
+    return _estimate_and_write(result, eq.W, eq.y, eq.bound, box_prior, method, N_JOINTS, eq.names, eq.joint, out)
 
 
 # ------------------------------------------------------------------------------- any serial robot (URDF)
@@ -375,14 +356,20 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
                             "singular_gap": base.singular_gap},
         "methods": {},
     }
+    return _estimate_and_write(result, eq.W, eq.y, rows_bound, prior, method, nj, base.names, eq.joint, out)
+
+
+def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: int, names, joint_of_row, out) -> dict:
+    """WLS or a box method on (W, y, bound) into ``result`` (a proven inconsistency is recorded, with
+    ``consistent`` False), then ``result.json`` into the owned folder ``out``; returns ``result``."""
     if method == "wls":
-        w = ident.wls(eq.W, eq.y, joints=nj, names=base.names, joint_of_row=eq.joint)
+        w = ident.wls(W, y, joints=joints, names=names, joint_of_row=joint_of_row)
         result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
                          "rel_std_percent": np.asarray(w.rel_std_percent).tolist()}
     else:
         t0 = time.perf_counter()
         try:
-            box = ident.estimate(eq.W, eq.y, rows_bound, prior, method=method)
+            box = ident.estimate(W, y, bound, prior, method=method)
             result["methods"][method] = {"status": "ok", "lower": box.lower.tolist(), "upper": box.upper.tolist(),
                                          "enclosed": None, "width": box.width.tolist(),
                                          "seconds": time.perf_counter() - t0}
