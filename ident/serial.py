@@ -313,6 +313,15 @@ class SerialRobot:
 
 
 # ------------------------------------------------------------------------------------------------- prior
+def parameter_joint(name: str) -> tuple[str, int]:
+    """A standard parameter's kind and 0-based joint (or link) index: ``"Izz3"`` -> ``("Izz", 2)``,
+    ``"fsm6"`` -> ``("fsm", 5)``. ValueError for a name without a trailing joint number."""
+    prefix = name.rstrip("0123456789")
+    if prefix == name or not prefix:
+        raise ValueError(f"name must be a parameter kind followed by its joint number (e.g. 'fv2'), got {name!r}")
+    return prefix, int(name[len(prefix):]) - 1
+
+
 def physical_prior(robot: SerialRobot, total_mass: float, reach: float, *, rotor_inertia_max: float | None = None,
                    ratios=None, offset_fraction: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
     """A physically meaningful, wide prior box on a serial robot's standard parameters: (lower (p,), upper (p,)).
@@ -359,8 +368,7 @@ def physical_prior(robot: SerialRobot, total_mass: float, reach: float, *, rotor
         return e / v if what == "viscous" else e
 
     for j, name in enumerate(robot.names):
-        prefix = name.rstrip("0123456789")
-        i = int(name[len(prefix):]) - 1
+        prefix, i = parameter_joint(name)
         if prefix in inertial:
             lo[j], hi[j] = inertial[prefix]
         elif prefix in ("fv", "fvm"):

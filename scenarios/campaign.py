@@ -284,6 +284,25 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     return [runs[i] for i in range(n)], info
 
 
+def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: list[str], method_line,
+                  tail: list[str] = ()) -> None:
+    """A campaign kind's files: ``widths.png`` (relative widths over the runs), ``report.md`` (``# Scenario
+    `name`: title``, the kind's ``facts``, the throughput, one line per method from ``method_line(name, m)``, the
+    median relative width table, ``tail``) and ``result.json``, atomically each."""
+    from scenarios.report import relative_width_table
+    from scenarios.rundir import write_json
+    from sim.dataset import atomic_write_bytes
+
+    out = Path(out)
+    plot_relative_widths(result, runs, out / "widths.png")
+    lines = [f"# Scenario `{result['scenario']}`: {title}", "", *facts, *throughput_lines(result["campaign"])]
+    lines += [f"- {name}: {method_line(name, m)}" for name, m in result["methods"].items()]
+    lines += ["", "## Median relative width (width / |true value|) per parameter", "", relative_width_table(result),
+              "", *tail, "Plot: `widths.png`."]
+    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
+    write_json(out / "result.json", result)
+
+
 def throughput_lines(info: dict) -> list[str]:
     """The report's line on campaign throughput (none when every run was reused)."""
     if not info["runs_per_minute"]:

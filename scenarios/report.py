@@ -179,6 +179,13 @@ def relative_width_table(result: dict) -> str:
     return "\n".join(rows)
 
 
+def plot_beside_plain_hull(result: dict, out: Path, what: str, shown: dict | None = None) -> None:
+    """``boxes.png`` of a scenario built to make the plain hull fail: ``what`` (the method that should hold)
+    and the plain hull's status in the title; ``shown`` replaces the methods drawn (e.g. with a reference box)."""
+    plot_boxes({**result, "methods": shown if shown is not None else result["methods"]}, out / "boxes.png",
+               title=f"{result['scenario']}: {what}; plain hull: {result['methods']['hull']['status']}")
+
+
 def plot_boxes(result: dict, path: Path, title: str | None = None) -> None:
     """One row per parameter: each method's box divided by the true value, the truth at 1."""
     import matplotlib

@@ -8,10 +8,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from scenarios import report
-from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise, throughput_lines
+from scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
 from scenarios.rundir import OwnedFolder, save_run_files, write_json
 from scenarios.spec import ScenarioError
-from sim.dataset import atomic_write_bytes
 
 DESCRIPTION = "Monte Carlo over seeds, noise shapes, trajectories and true parameters: is the truth always enclosed?"
 RESUMABLE = True
@@ -52,26 +51,16 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
         return result
     runs, info = run_many(spec, seed, out, campaign_job, progress, fresh=fresh)
     result = summarise(spec, seed, runs, info)
-    plot_relative_widths(result, runs, Path(out) / "widths.png")
-    write_report(result, Path(out))
-    write_json(Path(out) / "result.json", result)
-    return result
-
-
-def write_report(result: dict, out: Path) -> None:
-    info = result["campaign"]
-    lines = [f"# Scenario `{result['scenario']}`: is the truth always enclosed?", "",
-             f"- runs: {result['runs']} (noise shapes {result['noise_shapes']}, true parameters randomised by "
+    facts = [f"- runs: {result['runs']} (noise shapes {result['noise_shapes']}, true parameters randomised by "
              f"+-{100 * result['parameter_spread']:.0f} %); reused from an earlier start: {info['reused']}",
              f"- bound covers the oracle residual in {result['runs_bound_covers_residual']} of {result['runs']} runs "
              f"(max oracle residual {result['oracle_residual']:.4g} N m)"]
-    lines += throughput_lines(info)
-    for name, m in result["methods"].items():
-        lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']}; misses where the bound covered the "
-                     f"residual (must be none): {m['misses_with_bound_covering_residual']}; median {m['seconds']:.3g} s")
-    lines += ["", "## Median relative width (width / |true value|) per parameter", "",
-              report.relative_width_table(result), "",
-              f"Inspect one run (a miss, say) with its dataset and Rerun replay: `h4bench run {result['scenario']} "
-              f"--seed {result['seed']} --only INDEX` (run INDEX has seed {result['seed']} + INDEX).", "",
-              "Plot: `widths.png`."]
-    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
+    tail = [f"Inspect one run (a miss, say) with its dataset and Rerun replay: `h4bench run {result['scenario']} "
+            f"--seed {result['seed']} --only INDEX` (run INDEX has seed {result['seed']} + INDEX).", ""]
+    write_outputs(result, runs, out, "is the truth always enclosed?", facts, _method_line, tail)
+    return result
+
+
+def _method_line(name: str, m: dict) -> str:
+    return (f"{m['misses']} miss(es) {m['miss_seeds']}; misses where the bound covered the residual (must be none): "
+            f"{m['misses_with_bound_covering_residual']}; median {m['seconds']:.3g} s")

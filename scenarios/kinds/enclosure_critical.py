@@ -16,12 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from ident.interval import down, point_matmul, up
-from scenarios.campaign import campaign_experiment, plot_relative_widths, run_many, summarise, throughput_lines
+from scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
 from scenarios.experiment import estimate_boxes
-from scenarios.report import relative_width_table
-from scenarios.rundir import write_json
 from scenarios.spec import ScenarioError
-from sim.dataset import atomic_write_bytes
 
 DESCRIPTION = "row bounds = each row's own oracle residual, rounded outward: a tiny feasible set, misses show rigour bugs"
 RESUMABLE = True
@@ -55,17 +52,13 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
     result = summarise(spec, seed, runs, info)
     result["bound"] = "critical (per row: its own oracle residual, rounded outward)"
     result["critical_bound_median"] = float(np.median([r["critical_bound_median"] for r in runs]))
-    out = Path(out)
-    plot_relative_widths(result, runs, out / "widths.png")
-    lines = [f"# Scenario `{result['scenario']}`: critical bounds, a test of rigour", "",
-             f"- runs: {result['runs']}; every row's bound is its own oracle residual rounded outward (median "
-             f"{result['critical_bound_median']:.3g} N m); the truth is feasible in {result['runs_bound_covers_residual']} "
-             f"of {result['runs']} runs (must be all)"]
-    lines += throughput_lines(info)
-    for name, m in result["methods"].items():
-        lines.append(f"- {name}: {m['misses']} miss(es) {m['miss_seeds']} (must be none: a miss is a rigour bug); "
-                     f"failed runs {m['failed_runs']}; median {m['seconds']:.3g} s")
-    lines += ["", "## Median relative width per parameter", "", relative_width_table(result), "", "Plot: `widths.png`."]
-    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
-    write_json(out / "result.json", result)
+    facts = [f"- runs: {result['runs']}; every row's bound is its own oracle residual rounded outward (median "
+             f"{result['critical_bound_median']:.3g} N m); the truth is feasible in "
+             f"{result['runs_bound_covers_residual']} of {result['runs']} runs (must be all)"]
+    write_outputs(result, runs, out, "critical bounds, a test of rigour", facts, _method_line)
     return result
+
+
+def _method_line(name: str, m: dict) -> str:
+    return (f"{m['misses']} miss(es) {m['miss_seeds']} (must be none: a miss is a rigour bug); failed runs "
+            f"{m['failed_runs']}; median {m['seconds']:.3g} s")

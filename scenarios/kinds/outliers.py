@@ -118,9 +118,7 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
     if clean_box is not None:  # the spike-free hull as a reference in the figure only
         shown["hull without spikes"] = {"status": "ok", "lower": clean_box.lower.tolist(),
                                         "upper": clean_box.upper.tolist()}
-    report.plot_boxes({**result, "methods": shown}, out / "boxes.png",
-                      title=f"{result['scenario']}: q-relaxed hull (q = {q}) on spiked data; plain hull: "
-                            f"{result['methods']['hull']['status']}")
+    report.plot_beside_plain_hull(result, out, f"q-relaxed hull (q = {q}) on spiked data", shown)
     _write_outliers_report(result, out)
     return result
 

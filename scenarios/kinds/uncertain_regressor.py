@@ -98,8 +98,7 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
     }
     progress("files", 4, 4)
     save_run_files(run, out, progress)
-    report.plot_boxes(result, out / "boxes.png", title=f"{result['scenario']}: interval-regressor hull; point-regressor hull: "
-                            f"{result['methods']['hull']['status']}")
+    report.plot_beside_plain_hull(result, out, "interval-regressor hull (the plain hull uses the point regressor)")
     _write_uncertain_report(result, out)
     return result
 

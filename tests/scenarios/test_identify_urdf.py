@@ -9,7 +9,6 @@ and :func:`ident.estimate` with the documented settings (``URDF_PROCESSING``, de
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,7 @@ from typer.testing import CliRunner
 
 import ident
 from ident import tx40
-from ident.serial import SerialRobot, default_reach, physical_prior, process
+from ident.serial import SerialRobot, default_reach, parameter_joint, physical_prior, process
 from scenarios.cli import app
 from scenarios.identify import URDF_PROCESSING
 
@@ -38,8 +37,7 @@ def _tx40_prior_formulas(robot):
     vmax = np.asarray(robot.model.velocityLimit, dtype=float)
     ratios = np.abs(np.asarray(tx40.RATIOS))
     for j, name in enumerate(robot.names):
-        prefix = name.rstrip("0123456789")
-        i = int(name[len(prefix):]) - 1
+        prefix, i = parameter_joint(name)  # the name parsing is shared; the formulas below are the reference
         if prefix in off:
             lo[j], hi[j] = off[prefix]
         elif prefix in ("fv", "fvm"):
