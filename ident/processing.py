@@ -59,7 +59,7 @@ def raw_equation(geometry, q, tau, dt: float, settings: ProcessingSettings | Non
     (q, qd, qdd) estimated at those samples).
     """
     settings = settings or ProcessingSettings(dt=dt)
-    est = derivatives(q, dt, settings.position_cutoff_hz, settings.butter_order)
+    est = derivatives(q, dt, settings.position_cutoff_hz, settings.butter_order, timing=settings.torque_timing)
     v = est.valid
     qf, qd, qdd = est.q[v], est.qd[v], est.qdd[v]
     samples = np.arange(q.shape[0])[v]
@@ -176,7 +176,8 @@ def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None
         k1 = min(m, k0 + per_block)
         a, b = trim + k0 * factor, trim + (k1 - 1) * factor + L  # samples whose rows the block's outputs use
         c0, c1 = (0, n) if (k0 == 0 and k1 == m) else (max(0, a - margin), min(n, b + margin))
-        est = derivatives(q[c0:c1], dt, settings.position_cutoff_hz, settings.butter_order, trim=0)
+        est = derivatives(q[c0:c1], dt, settings.position_cutoff_hz, settings.butter_order, trim=0,
+                          timing=settings.torque_timing)
         sl = slice(a - c0, b - c0)
         qd = est.qd[sl]
         w = regressor(geometry, est.q[sl], qd, est.qdd[sl], structure=structure)

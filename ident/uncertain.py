@@ -446,7 +446,8 @@ class Distortion:
 
 
 def _processed_states(q, settings: ProcessingSettings):
-    est = derivatives(q, settings.dt, settings.position_cutoff_hz, settings.butter_order)
+    est = derivatives(q, settings.dt, settings.position_cutoff_hz, settings.butter_order,
+                      timing=settings.torque_timing)
     v = est.valid
     return est.q[v], est.qd[v], est.qdd[v], np.arange(q.shape[0])[v]
 

@@ -239,6 +239,9 @@ def identify(
                                                 "turns with joint A (e.g. 5,6 on a Staubli wrist)"),
     cutoff_hz: str = typer.Option("100", help="--urdf: Butterworth cut-off on q [Hz]"),
     decimation: str = typer.Option("100", help="--urdf: decimation factor of the parallel filter"),
+    torque_timing: str = typer.Option("hold", help="H4: hold (each logged torque is a command held over its "
+                                      "step: a controller's log, the simulator's) | sample (a torque measured "
+                                      "at the sample instant)"),
     method: str = typer.Option("hull", help="hull | cgsp | wls"),
     prior: Optional[Path] = typer.Option(None, help="per-parameter prior: .toml ([Imot1] lower = .. upper = ..) "
                                          "or .csv (name,lower,upper); unnamed parameters keep the pair below"),
@@ -261,6 +264,9 @@ def identify(
         if method not in METHODS:
             raise OptionError(f"--method must be one of {' | '.join(METHODS)}, got {method!r}")
         if urdf is not None:
+            if torque_timing != "hold":
+                raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
+                                  f"regressor at the sample instants), got --torque-timing {torque_timing}")
             result = _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist,
                                     cutoff_hz, decimation, prior, model, out)
         else:
@@ -270,7 +276,7 @@ def identify(
                                 ("--coupled-wrist", coupled_wrist)):
                 if value is not None:
                     raise OptionError(f"{name} needs --urdf (the H4's settings are its spec's), got {name}")
-            result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out)
+            result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing)
     except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))
     if as_json:
@@ -328,7 +334,7 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out)
 
 
-def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out) -> dict:
+def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold") -> dict:
     from scenarios.identify import OptionError, identify_csv, load_prior, parse_bound, parse_number
 
     bounds = parse_bound(bound)
@@ -336,7 +342,9 @@ def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, ou
     if not lo < hi:
         raise OptionError(f"--prior-lower must be < --prior-upper, got {lo:g} and {hi:g}")
     box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
-    return identify_csv(file, bounds, method=method, prior=box, model=model, out=out)
+    if torque_timing not in ("hold", "sample"):
+        raise OptionError(f"--torque-timing must be hold or sample, got {torque_timing!r}")
+    return identify_csv(file, bounds, method=method, prior=box, model=model, out=out, torque_timing=torque_timing)
 
 
 @app.command()

@@ -189,11 +189,13 @@ def _joint_bounds(bound) -> np.ndarray:
 
 
 def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None, out=None,
-                 block_samples: int = BLOCK_SAMPLES) -> dict:
+                 block_samples: int = BLOCK_SAMPLES, torque_timing: str = "hold") -> dict:
     """Identify the 14 parameters from a CSV log and write ``result.json`` in ``out``.
 
     bound : raw-row bound [N m], one number or (4,) per joint; prior : (lower, upper) numbers, (14,) arrays
-    each, or a Box; block_samples : processing block length (:func:`ident.processing.build_equation`).
+    each, or a Box; block_samples : processing block length (:func:`ident.processing.build_equation`);
+    torque_timing : "hold" (each logged torque is a command held over its step: the regressor at mid-step) or
+    "sample" (a torque measured at the sample instant), :func:`ident.filtering.derivatives`.
     Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
     (the method's status ``failed`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
     """
@@ -204,7 +206,7 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
     dataset = sim.Dataset.from_csv(path)
     geometry = sim.H4Geometry.from_model(sim.load_model(model))
-    settings = ProcessingSettings(dt=dataset.dt, **DEFAULTS["processing"])
+    settings = ProcessingSettings(dt=dataset.dt, **{**DEFAULTS["processing"], "torque_timing": torque_timing})
     eq = build_equation(geometry, dataset, b, settings, prior=box_prior, block_samples=block_samples)
     samples = len(dataset)
     del dataset
@@ -213,7 +215,8 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
         "scenario": f"identify-{Path(path).stem}", "kind": "identify", "seed": None, "model": str(model or sim.DEFAULT_MODEL_PATH),
         "source": str(path), "samples": samples, "parameters": list(ident.PARAMETER_NAMES), "true": None,
         "bound": float(b[0]) if uniform else b.tolist(), "bound_processed": float(eq.bound.max()), "rows": len(eq),
-        "processing": {k: v for k, v in eq.info.items() if k in ("blocks", "block_samples", "block_margin", "l1_norm")},
+        "processing": {"torque_timing": settings.torque_timing,
+                       **{k: v for k, v in eq.info.items() if k in ("blocks", "block_samples", "block_margin", "l1_norm")}},
         "oracle_residual": None, "consistent": None,
         "prior": {"lower": box_prior.lower.tolist(), "upper": box_prior.upper.tolist()}, "methods": {},
     }

@@ -267,7 +267,7 @@ def _log_signals(rec, rr, run) -> None:
 
     ds, truth, s = run.dataset, run.truth, run.settings
     t = np.asarray(ds.t, dtype=float)
-    est = derivatives(ds.q, ds.dt, s.position_cutoff_hz, s.butter_order)
+    est = derivatives(ds.q, ds.dt, s.position_cutoff_hz, s.butter_order, timing=s.torque_timing)
     v = est.valid
     eq = run.equation
     residual = eq.y - eq.W @ np.asarray(run.theta_true, dtype=float)

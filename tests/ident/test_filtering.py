@@ -146,6 +146,32 @@ def test_derivatives_valid_region_matches_analytic():
         derivatives(q[:50], DT, 50.0)
 
 
+def test_hold_timing_gives_the_mid_step_states():
+    """timing="hold": the regressor's states at t_k + dt/2 (a torque held over [t_k, t_k + dt)), to the stencils'
+    Taylor remainders: q by the mean (dt^2/8 |qdd|), qd by the forward difference (dt^2/24 |d3q|), qdd by the
+    mean of two second differences (dt^2/12 |d4q| + dt^2/8 |d4q| from the averaging)."""
+    n = 5000
+    q, _, _, a, w = _sines(n, DT)
+    t_mid = (np.arange(n)[:, None] + 0.5) * DT
+    ph = np.arange(4)[None, :]
+    q_mid, qd_mid, qdd_mid = (a * np.sin(w * t_mid + ph), a * w * np.cos(w * t_mid + ph),
+                              -a * w**2 * np.sin(w * t_mid + ph))
+    held = derivatives(q, DT, 50.0, timing="hold")
+    at = derivatives(q, DT, 50.0)
+    v = held.valid
+    assert v == at.valid
+    edge = (2e-7, 5e-4, 2e-2)  # what is left of the Butterworth edge transient (as in the test above)
+    np.testing.assert_allclose(held.q[v], q_mid[v], rtol=0, atol=(DT**2 / 8 * a * w**2).max() + edge[0])
+    np.testing.assert_allclose(held.qd[v], qd_mid[v], rtol=0, atol=(DT**2 / 24 * a * w**3).max() + edge[1])
+    np.testing.assert_allclose(held.qdd[v], qdd_mid[v], rtol=0, atol=(5 * DT**2 / 24 * a * w**4).max() + edge[2])
+    # half a step from the sample instants: qd moves by about dt/2 |qdd| (here up to 0.13 rad/s)
+    assert np.abs(held.qd[v] - at.qd[v]).max() > 0.1
+    with pytest.raises(ValueError, match="torque_timing must be one of 'sample', 'hold'.*got 'zoh'"):
+        derivatives(q, DT, 50.0, timing="zoh")
+    with pytest.raises(ValueError, match="torque_timing"):
+        ProcessingSettings(torque_timing="middle")
+
+
 # ------------------------------------------------------------------------------------------ parallel filter
 
 

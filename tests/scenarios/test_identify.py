@@ -142,7 +142,7 @@ def test_reader_header_errors(tmp_path):
 
 def _whole_record(geometry, ds, row_bound, settings, t_abs):
     """The paper's processing on the whole record, straight from ident.filtering (the reference)."""
-    est = derivatives(ds.q, ds.dt, settings.position_cutoff_hz, settings.butter_order)
+    est = derivatives(ds.q, ds.dt, settings.position_cutoff_hz, settings.butter_order, timing=settings.torque_timing)
     v = est.valid
     samples = np.arange(len(ds))[v]
     w = regressor(geometry, est.q[v], est.qd[v], est.qdd[v])
@@ -154,9 +154,10 @@ def _whole_record(geometry, ds, row_bound, settings, t_abs):
     return fe.W[rows], fe.y[rows], fe.bound[rows], samples[fe.sample_index[rows // 4]], rows % 4
 
 
-def test_blocks_give_the_rows_of_the_whole_record(experiment):
+@pytest.mark.parametrize("timing", ["hold", "sample"])
+def test_blocks_give_the_rows_of_the_whole_record(experiment, timing):
     ds, geometry = experiment.dataset, experiment.geometry
-    settings = ProcessingSettings(dt=ds.dt, **DEFAULTS["processing"])
+    settings = ProcessingSettings(dt=ds.dt, **{**DEFAULTS["processing"], "torque_timing": timing})
     prior = ident.Box(np.zeros(14), np.full(14, 2.0))
     per_joint = np.array([1.2, 1.5, 1.5, 1.0])
     W0, y0, b0, s0, j0 = _whole_record(geometry, ds, np.tile(per_joint, len(ds)), settings, np.full(14, 2.0))
@@ -245,6 +246,7 @@ def test_static_log_names_the_cause(tmp_path):
     (["--method", "lsq"], ["--method", "hull | cgsp | wls", "'lsq'"]),
     (["--prior", "nope.toml"], ["--prior", "nope.toml", "not found"]),
     (["--bound", "nope.csv"], ["--bound", "nope.csv", "not found"]),
+    (["--torque-timing", "zoh"], ["--torque-timing", "hold or sample", "'zoh'"]),
 ])
 def test_bad_option_values_give_one_error_line(good_csv, tmp_path, args, fragments):
     full = ["--bound", "1.5"] + args if "--bound" not in args else args
