@@ -647,7 +647,7 @@ LOG_LSB = 2.0**-7
 
 
 def realistic_drive(bound: float = 1.0, torque_limit: float = TORQUE_LIMIT, lsb: float = LOG_LSB) -> TorqueError:
-    """The "realistic drive" mix with total ``bound`` [N m] (default 1.0: the paper scenario's injected part).
+    """The "realistic drive" mix with total ``bound`` [N m] (default 1.0; the paper scenario injects 1.3).
 
     Shares (:data:`REALISTIC_DRIVE_SHARES`, calibrated on the paper's Table 1: see there): drift 80 % (band
     < 0.2 Hz), gain error 10 % (worst case, g = 0.10 bound / torque_limit), ripple 5 % over orders (1, 11, 66)

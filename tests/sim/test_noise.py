@@ -226,7 +226,7 @@ def test_spec_table_in_the_docstring_builds_the_documented_model():
 
 def test_realistic_drive_preset():
     model = N.realistic_drive()
-    assert model.bound == 1.0  # the paper scenario's injected part (1.5 N m = 1.0 + 0.5 allowance)
+    assert model.bound == 1.0  # the default; the paper scenario injects realistic_drive(1.3) (1.5 N m = 1.3 + 0.2)
     parts = {c["kind"]: c["bound"] for c in model.describe()["components"]}
     for kind, share in N.REALISTIC_DRIVE_SHARES.items():
         if share is not None:
