@@ -7,10 +7,10 @@ design time, and the paper setting's widths beside the paper's Table 1.
 
 Trajectories (per seed): today's cond design under the default limits, the seeded start, a cond design and an
 h design under the H4-class envelope (``Limits.h4_class()``): 4 x seeds (20 at the default 5 seeds). Actual
-widths: ``scenarios.experiment.run_experiment`` on the paper spec (prior [0, 2], bound 1.0 + 0.5 N m, uniform
-noise) with the given reference, then the exact hull (``ident.estimate``) on the processed equation.
-``--cutoff`` sets the position low-pass of the identification's processing (the spec's 20 Hz lets the
-derivative error of fast motion exceed the 0.5 N m allowance; 50 Hz keeps it inside). Relative width =
+widths: ``scenarios.experiment.run_experiment`` on the paper spec (prior [0, 2], its torque error, bound and
+processing: scenarios/paper.toml) with the given reference, then the exact hull (``ident.estimate``) on the
+processed equation. ``--cutoff`` sets the position low-pass of the identification's processing (default 50 Hz,
+the spec's: 20-30 Hz distorts the acceleration of fast motion at velocity reversals). Relative width =
 width / true value. Design time: median over the h designs, and the ratio to the cond designs measured in the
 same run. The paper's relative widths: Table 1 box width / Table 2 WLS estimate (Poignet, Ramdani & Vivas,
 CDC 2003; numbers transcribed below).
