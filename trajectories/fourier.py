@@ -215,6 +215,9 @@ def _check_args(duration, harmonics, base_hz, seed, dt, slow_ratio, slow_fractio
         raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
 
 
+START_DRAWS = 8  # random starts tried (from the seed's generator) until the criterion is finite
+
+
 def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, base_hz: float = 0.5, seed: int = 0,
                        optimise: bool = True, limits=None, theta_nominal=None, *, dt: float = 1e-3,
                        slow_ratio: float = 0.2, slow_fraction: float = 0.3, ramp_s: float = 0.5,
@@ -278,15 +281,25 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
 
     rng = np.random.default_rng(seed)
     decay = 1.0 / np.arange(1, harmonics + 1)
-    z0 = (rng.standard_normal((2, harmonics, 4)) * decay[None, :, None]).ravel()
-    s0 = prob.largest_feasible_scale(z0)
-    if s0 == 0.0:
-        raise InfeasibleTrajectoryError("no feasible amplitude found for the random start: the limits leave no room "
-                                        "around home (check limits and theta_nominal)")
-    z_start = 0.9 * s0 * z0  # strictly inside the constraints
-    crit_start = prob.log_cond(z_start)
+    for draw in range(1, START_DRAWS + 1):
+        z0 = (rng.standard_normal((2, harmonics, 4)) * decay[None, :, None]).ravel()
+        s0 = prob.largest_feasible_scale(z0)
+        if s0 == 0.0:
+            raise InfeasibleTrajectoryError("no feasible amplitude found for the random start: the limits leave no "
+                                            "room around home (check limits and theta_nominal)")
+        z_start = 0.9 * s0 * z0  # strictly inside the constraints
+        crit_start = prob.log_cond(z_start)
+        # an infinite criterion: the "h" start keeps too few processed rows (slow joints under the speed threshold
+        # for a whole filter window) and the optimiser would stop at once: draw another start from the same seed
+        if math.isfinite(crit_start):
+            break
+    else:
+        raise InfeasibleTrajectoryError(
+            f"no random start of seed {seed} gives a finite {criterion!r} criterion in {START_DRAWS} draws: too few "
+            f"processed rows move faster than the speed threshold over a whole filter window (lower "
+            f"processing.speed_threshold or numtaps, or lengthen the trajectory)")
     record = {"criterion": criterion, "criterion_start": crit_start, "start_scale": 0.9 * s0,
-              "optimised": bool(optimise)}
+              "start_draws": draw, "optimised": bool(optimise)}
     z = z_start
     if optimise and max_iter > 0:
         res = prob.optimise(z_start, max_iter)

@@ -206,3 +206,28 @@ def test_design_gradient_matches_finite_differences_of_the_criterion(geometry):
         v /= np.linalg.norm(v)
         fd = (prob.criterion(z + eps * v) - prob.criterion(z - eps * v)) / (2 * eps)
         assert grad @ v == pytest.approx(fd, rel=1e-4)  # measured: agreement to ~1e-7
+
+
+def test_h_design_draws_another_start_when_the_first_keeps_too_few_rows(geometry, monkeypatch):
+    """An infinite criterion at the start (too few rows above the speed threshold) would stop the optimiser at
+    once: the design draws another start from the same seed's generator, and says how many it drew."""
+    from trajectories.bounded import HalfwidthProblem
+
+    kwargs = dict(seed=3, optimise=False, limits=tj.Limits.h4_class(), criterion="h", harmonics=4, base_hz=0.75,
+                  processing=PAPER_PROCESSING)
+    plain = tj.fourier_excitation(geometry, 4.0, **kwargs)
+    assert plain.parameters["optimisation"]["start_draws"] == 1
+    calls = {"n": 0}
+    original = HalfwidthProblem.log_cond
+
+    def first_start_infinite(self, z):
+        calls["n"] += 1
+        return np.inf if calls["n"] == 1 else original(self, z)
+
+    monkeypatch.setattr(HalfwidthProblem, "log_cond", first_start_infinite)
+    redrawn = tj.fourier_excitation(geometry, 4.0, **kwargs)
+    assert redrawn.parameters["optimisation"]["start_draws"] == 2
+    assert redrawn.checks["feasible"] and not np.allclose(redrawn.q, plain.q)
+    monkeypatch.setattr(HalfwidthProblem, "log_cond", lambda self, z: np.inf)
+    with pytest.raises(tj.InfeasibleTrajectoryError, match="seed 3.*finite 'h' criterion in 8 draws.*speed_threshold"):
+        tj.fourier_excitation(geometry, 4.0, **kwargs)
