@@ -39,6 +39,7 @@ import scipy.signal
 from sim.validation import as_float_array, check_finite, joint_array, positive, positive_int
 
 __all__ = [
+    "TORQUE_TIMINGS",
     "Derivatives",
     "FilteredEquation",
     "ProcessingSettings",
@@ -51,7 +52,6 @@ __all__ = [
     "parallel_filter",
     "second_difference",
     "torque_timing",
-    "TORQUE_TIMINGS",
 ]
 
 N_JOINTS = 4
