@@ -6,20 +6,27 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.robots.h4 import PARAMETER_NAMES
+__all__ = ["Box", "default_names"]
+
+
+def default_names(p: int) -> tuple[str, ...]:
+    """``theta1 .. thetap``: the names of a box or estimate whose parameters were not named (a robot's names come
+    from its model, e.g. :data:`ident.robots.h4.PARAMETER_NAMES`, carried by the prior)."""
+    return tuple(f"theta{i + 1}" for i in range(p))
 
 
 @dataclass(frozen=True)
 class Box:
     """An axis-aligned box of parameter vectors, ``lower <= theta <= upper`` component-wise.
 
-    lower, upper : (p,) float arrays; names : (p,) parameter names.
+    lower, upper : (p,) float arrays; names : (p,) parameter names (default :func:`default_names`:
+    ``theta1 .. thetap``).
     ``info`` carries optional diagnostics of the method that produced it (not part of equality).
     """
 
     lower: np.ndarray
     upper: np.ndarray
-    names: tuple[str, ...] = PARAMETER_NAMES
+    names: tuple[str, ...] | None = None
     info: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -27,12 +34,9 @@ class Box:
         upper = np.array(self.upper, dtype=float).reshape(-1)
         if lower.shape != upper.shape:
             raise ValueError(f"Box lower and upper must have the same shape, got {lower.shape} and {upper.shape}")
-        names = tuple(self.names)
+        names = default_names(lower.size) if self.names is None else tuple(self.names)
         if len(names) != lower.size:
-            if self.names is PARAMETER_NAMES:
-                names = tuple(f"theta{i + 1}" for i in range(lower.size))
-            else:
-                raise ValueError(f"Box names must have {lower.size} entries, got {len(names)}")
+            raise ValueError(f"Box names must have {lower.size} entries, got {len(names)}")
         if np.any(np.isnan(lower)) or np.any(np.isnan(upper)):
             raise ValueError("Box bounds must not be NaN")
         if np.any(lower > upper):

@@ -3,7 +3,7 @@ them)."""
 
 from __future__ import annotations
 
-__all__ = ["InconsistentDataError", "LPError", "LPFallbackWarning", "OutlierBudgetError", "ProcessingError",
+__all__ = ["EstimatorError", "InconsistentDataError", "LPError", "LPFallbackWarning", "OutlierBudgetError", "ProcessingError",
            "UnidentifiableError"]
 
 
@@ -55,3 +55,8 @@ class LPError(RuntimeError):
 
 class LPFallbackWarning(RuntimeWarning):
     """An LP could not be solved; a coarser rigorous bound (or the prior) was used for some endpoints."""
+
+
+class EstimatorError(ValueError):
+    """An estimator could not be found or loaded, or returned something that is not a valid box for the prior
+    (the message names the estimator and what was wrong)."""

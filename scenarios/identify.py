@@ -170,7 +170,7 @@ def _prior_box(prior) -> "ident.Box":
             raise ValueError(f"prior of {name} must be finite, got [{lo[j]}, {hi[j]}]")
         if not lo[j] < hi[j]:
             raise ValueError(f"prior of {name} must have lower < upper, got [{lo[j]:g}, {hi[j]:g}]")
-    return ident.Box(lo, hi)
+    return ident.Box(lo, hi, ident.PARAMETER_NAMES)
 
 
 def _joint_bounds(bound) -> np.ndarray:

@@ -21,11 +21,11 @@ import warnings
 
 import numpy as np
 
-from ident.box import Box
+from ident.box import Box, default_names
 from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
 from ident.estimators.cgsp import cgsp
+from ident.estimators.checks import check_bound, check_finite, check_prior, check_W_y, real_array
 from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
-from ident.robots.h4 import PARAMETER_NAMES
 
 __all__ = [
     "METHODS",
@@ -43,80 +43,6 @@ METHODS = ("hull", "cgsp")
 
 
 # ------------------------------------------------------------------------------------------- validation
-def default_names(p: int) -> tuple[str, ...]:
-    """``PARAMETER_NAMES`` when ``p == 14``, else ``theta1 .. thetap``."""
-    return PARAMETER_NAMES if p == len(PARAMETER_NAMES) else tuple(f"theta{i + 1}" for i in range(p))
-
-
-def _real_array(x, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except Exception as exc:  # ragged lists and the like
-        raise TypeError(f"{name} must be a real numeric array, got {type(x).__name__} ({exc})") from None
-    if arr.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
-    arr = np.asarray(arr, dtype=float)
-    return np.ascontiguousarray(arr) if arr.ndim else arr
-
-
-def _check_finite(arr: np.ndarray, name: str) -> None:
-    if np.isfinite(arr.sum()):  # one pass, no temporary; a NaN or inf anywhere makes the sum non-finite
-        return
-    bad = ~np.isfinite(arr)
-    if not bad.any():
-        return  # the sum overflowed, the entries are fine
-    n_nan = int(np.isnan(arr).sum())
-    n_inf = int(bad.sum()) - n_nan
-    first = tuple(int(i) for i in np.unravel_index(int(np.flatnonzero(bad.ravel())[0]), arr.shape))
-    raise ValueError(f"{name} must be finite, got {n_nan} NaN and {n_inf} inf entries (first at index {first})")
-
-
-def _check_W_y(W, y) -> tuple[np.ndarray, np.ndarray]:
-    W = _real_array(W, "W")
-    if W.ndim != 2 or W.shape[1] < 1 or W.shape[0] < W.shape[1]:
-        raise ValueError(f"W must have shape (m, p) with m >= p >= 1, got {W.shape}")
-    _check_finite(W, "W")
-    y = _real_array(y, "y")
-    if y.shape != (W.shape[0],):
-        raise ValueError(f"y must have shape (m,) = ({W.shape[0]},) to match W, got {y.shape}")
-    _check_finite(y, "y")
-    return W, y
-
-
-def _check_bound(bound, m: int) -> tuple[np.ndarray, bool]:
-    b = _real_array(bound, "bound")
-    if b.ndim == 0:
-        if not (np.isfinite(b) and b > 0):
-            raise ValueError(f"bound must be finite and > 0 (a scalar or one value per row), got {float(b)!r}")
-        return np.full(m, float(b)), True
-    if b.shape != (m,):
-        raise ValueError(f"bound must be a scalar or have shape (m,) = ({m},), got shape {b.shape}")
-    bad = ~(np.isfinite(b) & (b > 0))
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"bound must be finite and > 0 in every row, got {float(b[k])!r} at row {k} ({int(bad.sum())} bad rows)")
-    return b, False
-
-
-def _check_prior(prior, p: int) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    if isinstance(prior, Box):
-        lo, hi, names = np.array(prior.lower, dtype=float), np.array(prior.upper, dtype=float), prior.names
-    elif isinstance(prior, (tuple, list)) and len(prior) == 2:
-        lo = _real_array(prior[0], "prior lower")
-        hi = _real_array(prior[1], "prior upper")
-        names = default_names(p)
-    else:
-        raise TypeError(f"prior must be a Box or a (lower, upper) pair of arrays of length {p}, got {type(prior).__name__}")
-    if lo.shape != (p,) or hi.shape != (p,):
-        raise ValueError(f"prior lower and upper must have shape ({p},) to match W's columns, got {lo.shape} and {hi.shape}")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise ValueError("prior must be finite: an interval hull needs a bounded prior box (got NaN or inf bounds)")
-    if np.any(lo > hi):
-        bad = [names[i] for i in np.flatnonzero(lo > hi)]
-        raise ValueError(f"prior lower must be <= upper, violated for {bad}")
-    return lo, hi, tuple(names)
-
-
 def _check_method(method) -> str:
     if not isinstance(method, str):
         raise TypeError(f"method must be a string, one of {METHODS}, got {type(method).__name__}")
@@ -186,14 +112,14 @@ def min_consistent_bound(W, y, prior) -> float:
     residual ``max |y - W theta*|`` at the LP's solution rounded upward, so ``bound = min_consistent_bound``
     is guaranteed consistent; it exceeds ``t*`` only by the LP tolerance (about 1e-9 relative).
     """
-    W, y = _check_W_y(W, y)
-    lo, hi, _ = _check_prior(prior, W.shape[1])
+    W, y = check_W_y(W, y)
+    lo, hi, _ = check_prior(prior, W.shape[1])
     G = W.T @ W
-    return _min_bound(W, y, lo, hi, _least_squares_center(G, W, y, lo, hi))
+    return _min_bound(W, y, lo, hi, least_squares_center(G, W, y, lo, hi))
 
 
 # ------------------------------------------------------------------------------------------------ estimate
-def _least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=None) -> np.ndarray:
+def least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=None) -> np.ndarray:
     """Least squares of the rows weighted by ``1 / b`` (G = W^T W when b is None or constant), clipped to
     the prior; column-equilibrated, so the point does not depend on the units of rows or parameters."""
     if b is not None and np.any(b != b[0]):
@@ -241,17 +167,17 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     """
     t0 = time.perf_counter()
     method = _check_method(method)
-    W, y = _check_W_y(W, y)
+    W, y = check_W_y(W, y)
     n, p = W.shape
-    b, scalar = _check_bound(bound, n)
-    lo, hi, names = _check_prior(prior, p)
+    b, scalar = check_bound(bound, n)
+    lo, hi, names = check_prior(prior, p)
     bl, bu = strip_bounds(y, b)
 
     G = W.T @ W
     info: dict = {"method": method}
     info.update(identifiability(W, names, gram=G))
 
-    center = _least_squares_center(G, W, y, lo, hi, None if scalar else b)
+    center = least_squares_center(G, W, y, lo, hi, None if scalar else b)
 
     def fallback(what: str) -> None:
         info.setdefault("fallbacks", []).append(what)

@@ -47,7 +47,7 @@ import time
 import highspy
 import numpy as np
 
-from ident.estimators.estimate import InconsistentDataError, _check_finite, _check_prior, _real_array, estimate
+from ident.estimators.estimate import InconsistentDataError, check_finite, check_prior, real_array, estimate
 from ident.estimators.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
 from ident.numerics.lp import LPError, add_dense_rows, check
 from ident.box import Box
@@ -81,7 +81,7 @@ class OnlineHull:
         if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1:
             raise ValueError(f"p must be an integer >= 1 (number of parameters), got {p!r}")
         self.p = int(p)
-        self._lo, self._hi, self.names = _check_prior(prior, self.p)
+        self._lo, self._hi, self.names = check_prior(prior, self.p)
         for name, val in (("lp_tol", lp_tol), ("violation_tol", violation_tol)):
             if isinstance(val, bool) or not isinstance(val, (int, float)) or not (np.isfinite(val) and val > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {val!r}")
@@ -180,21 +180,21 @@ class OnlineHull:
         Raises :class:`~ident.InconsistentDataError` when the rows seen so far are proven inconsistent.
         """
         t0 = time.perf_counter()
-        W = _real_array(W_rows, "W_rows")
+        W = real_array(W_rows, "W_rows")
         if W.ndim == 1 and W.size == self.p:
             W = W[None, :]
         if W.ndim != 2 or W.shape[1] != self.p:
             raise ValueError(f"W_rows must have shape (k, {self.p}), got {W.shape}")
         k = W.shape[0]
-        y = np.atleast_1d(_real_array(y_rows, "y_rows"))
+        y = np.atleast_1d(real_array(y_rows, "y_rows"))
         if y.shape != (k,):
             raise ValueError(f"y_rows must have shape ({k},) to match W_rows, got {y.shape}")
-        b = _real_array(bound_rows, "bound_rows")
+        b = real_array(bound_rows, "bound_rows")
         b = np.full(k, float(b)) if b.ndim == 0 else b
         if b.shape != (k,):
             raise ValueError(f"bound_rows must be a scalar or have shape ({k},), got {b.shape}")
-        _check_finite(W, "W_rows")
-        _check_finite(y, "y_rows")
+        check_finite(W, "W_rows")
+        check_finite(y, "y_rows")
         if not np.all(np.isfinite(b) & (b > 0)):
             raise ValueError("bound_rows must be finite and > 0 in every row")
         if k == 0:

@@ -66,9 +66,9 @@ import numpy as np
 from ident.box import Box
 from ident.errors import InconsistentDataError, OutlierBudgetError
 from ident.estimators.estimate import (
-    _check_bound,
-    _check_prior,
-    _check_W_y,
+    check_bound,
+    check_prior,
+    check_W_y,
     estimate,
     min_consistent_bound,
 )
@@ -135,9 +135,9 @@ def detect_outliers(W, y, bound, box) -> OutlierRows:
     box of :func:`relaxed_hull`. If ``box`` encloses ``S_q``, every certain row is an outlier of every
     parameter vector consistent with all but q rows (rigorous: outward-rounded strips and interval ranges).
     """
-    W, y = _check_W_y(W, y)
-    b, _ = _check_bound(bound, W.shape[0])
-    lo, hi, _ = _check_prior(box, W.shape[1])
+    W, y = check_W_y(W, y)
+    b, _ = check_bound(bound, W.shape[0])
+    lo, hi, _ = check_prior(box, W.shape[1])
     return _detect(W, *strip_bounds(y, b), lo, hi)
 
 
@@ -475,10 +475,10 @@ def relaxed_hull(W, y, bound, prior, q: int, *, method: str = "auto", groups=Non
     ``ValueError``/``TypeError`` naming the argument on bad input.
     """
     t0 = time.perf_counter()
-    W, y = _check_W_y(W, y)
+    W, y = check_W_y(W, y)
     m, p = W.shape
-    b, scalar = _check_bound(bound, m)
-    lo, hi, names = _check_prior(prior, p)
+    b, scalar = check_bound(bound, m)
+    lo, hi, names = check_prior(prior, p)
     q = _check_q(q, m)
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")

@@ -73,11 +73,11 @@ import scipy.signal
 
 from ident.estimators.estimate import (
     InconsistentDataError,
-    _check_bound,
-    _check_finite,
-    _check_prior,
-    _least_squares_center,
-    _real_array,
+    check_bound,
+    check_finite,
+    check_prior,
+    least_squares_center,
+    real_array,
 )
 from ident.processing.filtering import (
     ProcessingSettings,
@@ -110,36 +110,36 @@ N_JOINTS = 4
 
 # ----------------------------------------------------------------------------------------------- checks
 def _check_interval_matrix(Wc, D, y) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    Wc = _real_array(Wc, "Wc")
+    Wc = real_array(Wc, "Wc")
     if Wc.ndim != 2 or Wc.shape[1] < 1 or Wc.shape[0] < 1:
         raise ValueError(f"Wc must have shape (m, p) with m, p >= 1, got {Wc.shape}")
-    _check_finite(Wc, "Wc")
-    D = _real_array(D, "D")
+    check_finite(Wc, "Wc")
+    D = real_array(D, "D")
     if D.ndim == 0:
         D = np.full(Wc.shape, float(D))
     if D.shape != Wc.shape:
         raise ValueError(f"D must be a scalar or have the shape of Wc {Wc.shape}, got {D.shape}")
-    _check_finite(D, "D")
+    check_finite(D, "D")
     if np.any(D < 0):
         k = tuple(int(i) for i in np.unravel_index(int(np.argmin(D)), D.shape))
         raise ValueError(f"D must be >= 0 (a radius), got {float(D[k])!r} at index {k}")
-    y = _real_array(y, "y")
+    y = real_array(y, "y")
     if y.shape != (Wc.shape[0],):
         raise ValueError(f"y must have shape (m,) = ({Wc.shape[0]},) to match Wc, got {y.shape}")
-    _check_finite(y, "y")
+    check_finite(y, "y")
     return Wc, D, y
 
 
 def _states(x, name: str, n: int | None = None) -> np.ndarray:
-    a = _real_array(x, name)
+    a = real_array(x, name)
     if a.ndim != 2 or a.shape[1] != N_JOINTS or (n is not None and a.shape[0] != n):
         raise ValueError(f"{name} must have shape ({'n' if n is None else n}, {N_JOINTS}), got {a.shape}")
-    _check_finite(a, name)
+    check_finite(a, name)
     return a
 
 
 def _radius(r, name: str, n: int) -> np.ndarray:
-    a = _real_array(r, name)
+    a = real_array(r, name)
     try:
         a = np.broadcast_to(a, (n, N_JOINTS)).astype(float)
     except ValueError:
@@ -218,8 +218,8 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     t0 = time.perf_counter()
     Wc, D, y = _check_interval_matrix(Wc, D, y)
     m, p = Wc.shape
-    b, scalar = _check_bound(bound, m)
-    lo, hi, names = _check_prior(prior, p)
+    b, scalar = check_bound(bound, m)
+    lo, hi, names = check_prior(prior, p)
     if np.any(lo < 0):
         bad = [names[j] for j in np.flatnonzero(lo < 0)]
         raise ValueError(f"prior lower must be >= 0 for the interval regressor (Oettli-Prager polytope form "
@@ -244,7 +244,7 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
         return A, BL, BU
 
     info: dict = {"method": "interval", "rows": m}
-    center = _least_squares_center(Wc.T @ Wc, Wc, y, lo, hi, None if scalar else b)
+    center = least_squares_center(Wc.T @ Wc, Wc, y, lo, hi, None if scalar else b)
     A, BL, BU = stacked(b)
     if np.any(BL > BU):  # a row whose range over the prior misses its strip: S is empty (rigorous)
         s_lo, s_up, _, _ = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol, center)

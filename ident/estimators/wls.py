@@ -21,7 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident.estimators.estimate import UnidentifiableError, _check_W_y, default_names
+from ident.box import default_names
+from ident.errors import UnidentifiableError
+from ident.estimators.checks import check_W_y
 
 __all__ = ["WLSResult", "wls"]
 
@@ -77,7 +79,7 @@ def wls(W, y, joints: int = 4, *, names=None, joint_of_row=None) -> WLSResult:
     OLS residual is at rounding level, below 1e-12 of its rms torque, so its weight is undefined) and :class:`UnidentifiableError` naming the
     parameters the data do not determine when W (weighted, column-equilibrated) is rank-deficient.
     """
-    W, y = _check_W_y(W, y)
+    W, y = check_W_y(W, y)
     m, p = W.shape
     if isinstance(joints, bool) or not isinstance(joints, (int, np.integer)):
         raise TypeError(f"joints must be an int >= 1, got {type(joints).__name__}")

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim.validation import as_float_array, check_finite
+from ident.validation import as_float_array, check_finite
 
 __all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters", "default_reach", "physical_prior"]
 

@@ -71,7 +71,9 @@ def test_hull_is_inside_cgsp_up_to_rounding():
 def test_box_carries_names_and_diagnostics():
     W, y, bound, prior, theta = synthetic(1, 200, 14)
     box = ident.estimate(W, y, bound, prior)
-    assert box.names == PARAMETER_NAMES
+    assert box.names == tuple(f"theta{j + 1}" for j in range(14))  # generic: a (lower, upper) prior has no names
+    h4 = ident.estimate(W, y, bound, Box(prior[0], prior[1], names=PARAMETER_NAMES))
+    assert h4.names == PARAMETER_NAMES and np.array_equal(h4.lower, box.lower)  # the names come from the prior
     for key in ("lp_iterations", "working_rows", "seconds", "at_prior", "unidentifiable", "cond"):
         assert key in box.info
     assert box.info["working_rows"] <= 200 and box.info["seconds"] > 0
@@ -152,7 +154,7 @@ def test_undetermined_parameters_are_reported_by_name(method):
     W[:, 7] = W[:, 2]  # only Imot3 + Fv2 enters the data
     W[:, 12] = 0.0  # Fs3 never excited
     y = W @ theta + np.random.default_rng(0).uniform(-1, 1, 400)
-    box = ident.estimate(W, y, 1.0, (lo, hi), method=method)
+    box = ident.estimate(W, y, 1.0, Box(lo, hi, names=PARAMETER_NAMES), method=method)
     assert np.all(np.isfinite(box.lower)) and np.all(np.isfinite(box.upper)) and box.contains(theta).all()
     assert set(box.info["unidentifiable"]) == {"Imot3", "Fv2", "Fs3"}
     assert "Fs3" in box.info["at_prior"]
