@@ -27,14 +27,29 @@ import numpy as np
 
 import ident
 import sim
+from ident.errors import EstimatorError
+from ident.estimators import registry
 from ident.processing.filtering import ProcessingSettings
 from ident.processing.processing import BLOCK_SAMPLES, build_equation
 from scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 from scenarios.spec import DEFAULTS
 
-METHODS = ("hull", "cgsp", "wls")
+METHODS = (*registry.BUILTINS, "wls")  # the built-in box estimators (any the registry resolves works) and WLS
 N_JOINTS = 4
 EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (InconsistentDataError)
+
+
+def check_method(method) -> str:
+    """``"wls"`` or a box estimator the registry resolves (:func:`ident.estimators.registry.get`); ValueError
+    naming the choices otherwise."""
+    if method == "wls":
+        return method
+    try:
+        registry.get(method)
+    except (EstimatorError, TypeError) as exc:
+        raise ValueError(f"method must be one of {METHODS} (or an estimator plugin), got {method!r}: {exc}") \
+            from None
+    return method
 
 
 class OptionError(ValueError):
@@ -199,8 +214,7 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
     (the method's status ``failed`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    check_method(method)
     b = _joint_bounds(bound)
     box_prior = _prior_box(prior)
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
@@ -295,8 +309,7 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     """
     from ident.robots.serial import SerialRobot, default_reach, physical_prior, process
 
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    check_method(method)
     urdf = Path(urdf)
     if not urdf.is_file():
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")

@@ -23,6 +23,7 @@ import numpy as np
 
 from ident.box import Box, default_names
 from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
+from ident.estimators import registry
 from ident.estimators.cgsp import cgsp
 from ident.estimators.checks import check_bound, check_finite, check_prior, check_W_y, real_array
 from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
@@ -32,12 +33,14 @@ __all__ = [
     "InconsistentDataError",
     "UnidentifiableError",
     "default_names",
+    "cgsp_estimator",
     "estimate",
+    "hull_estimator",
     "identifiability",
     "min_consistent_bound",
 ]
 
-METHODS = ("hull", "cgsp")
+METHODS = tuple(registry.BUILTINS)  # the built-in set-membership methods, read from the one registry
 
 
 
@@ -139,8 +142,8 @@ def least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=
     return np.clip(sol, lo, hi)
 
 
-def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: bool = True) -> Box:
-    """Guaranteed box enclosing ``S = {theta in prior : |y - W theta| <= bound}``.
+def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: bool = True) -> Box:
+    """The built-in estimators ``"hull"`` and ``"cgsp"``: a guaranteed box enclosing ``S = {theta in prior : |y - W theta| <= bound}``.
 
     W : (m, p) regressor (rows stacked sample k, joint i -> row 4k + i for the H4, any order works);
     y : (m,) measurements (e.g. motor torques [N m]); bound : scalar or (m,) positive error bound(s) in the
@@ -181,7 +184,7 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
 
     def fallback(what: str) -> None:
         info.setdefault("fallbacks", []).append(what)
-        warnings.warn(f"estimate: {what}", LPFallbackWarning, stacklevel=3)
+        warnings.warn(f"estimate: {what}", LPFallbackWarning, stacklevel=6)  # the caller of estimate
 
     def check_consistency_by_lp():
         """Chebyshev LP with weights b: raise if S is proven empty, else record whether it is proven non-empty.
@@ -253,3 +256,35 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     info["at_prior"] = tuple(names[j] for j in np.flatnonzero(at_prior))
     info["seconds"] = time.perf_counter() - t0
     return Box(lower=lower, upper=upper, names=names, info=info)
+
+
+def hull_estimator(W, y, bound, prior, *, check_consistency: bool = True) -> Box:
+    """The built-in ``"hull"`` (:func:`_builtin_estimate` with ``method="hull"``; ``check_consistency`` is
+    accepted for symmetry: the hull always decides emptiness)."""
+    return _builtin_estimate(W, y, bound, prior, "hull", check_consistency=check_consistency)
+
+
+def cgsp_estimator(W, y, bound, prior, *, check_consistency: bool = True) -> Box:
+    """The built-in ``"cgsp"`` (:func:`_builtin_estimate` with ``method="cgsp"``)."""
+    return _builtin_estimate(W, y, bound, prior, "cgsp", check_consistency=check_consistency)
+
+
+def estimate(W, y, bound, prior, method="hull", *, check_consistency: bool = True, **context) -> Box:
+    """Guaranteed (or, for a statistical plugin, confidence) box of ``theta`` from ``|y - W theta| <= bound``.
+
+    W : (m, p) regressor (rows stacked sample k, joint i -> row 4k + i for the H4, any order works); y : (m,)
+    measurements (e.g. motor torques [N m]); bound : scalar or (m,) positive error bound(s) in the units of y;
+    prior : :class:`~ident.Box` or ``(lower, upper)`` finite arrays of length p.
+    method : a built-in name (``"hull"``: the exact hull, rigorous LP endpoints; ``"cgsp"``: the paper's
+    contractor; see :func:`_builtin_estimate` for their ``info``), the name of an entry point of group
+    ``h4bench.estimators``, a ``"package.module:attribute"`` string or a callable ``f(W, y, bound, prior,
+    **context) -> Box`` (:mod:`ident.estimators.registry`). check_consistency : for ``"cgsp"``, also solve one
+    Chebyshev LP to detect an empty S the contractor did not expose. context : ``groups`` ((m,) ints),
+    ``instruments`` ((m, p)), passed only to estimators that accept them.
+    Returns the Box (checked: the prior's shape, finite, lower <= upper, else
+    :class:`~ident.EstimatorError` naming the estimator). Raises :class:`InconsistentDataError` when S is
+    proven empty; ``ValueError``/``TypeError`` on bad input.
+    """
+    est = registry.get(method)
+    context["check_consistency"] = check_consistency  # a keyword of the built-ins, dropped for others
+    return registry.call(est, W, y, bound, prior, **context)
