@@ -20,7 +20,7 @@ What the recording holds (one timeline, ``sim_time``: a duration in seconds, the
 
 Bulk data goes through ``send_columns`` (one call per series or per 3D entity), never one call per sample.
 Rerun is imported inside the functions only (it is the scenario layer's optional viewer, not a dependency of
-the numerics). Field notes on the Rerun 0.41 API: NOTES.md, section "rerun-sdk 0.41".
+the numerics). The calls are those of rerun-sdk 0.41 (the version pinned in pyproject.toml).
 
 Cost: the 3D scene and series are a few tens of ``send_columns`` calls (0.2-0.3 s for a 10 s run, a ~9 MB
 file); the box history runs each estimator on ``points - 1`` growing prefixes of the rows (the full-data box is

@@ -215,7 +215,8 @@ def test_integer_and_fortran_ordered_input_is_accepted():
 
 
 def test_estimators_import_neither_sim_nor_mujoco():
-    """DESIGN.md: the estimators work on any (W, y) and never import the simulator (static check)."""
+    """The estimators work on any (W, y) and never import the simulator (static check; the layer rules are in
+    tests/test_architecture.py)."""
     import ast
     from pathlib import Path
 

@@ -132,7 +132,8 @@ def test_bad_inputs_are_named():
 
 
 def test_new_estimators_import_neither_sim_nor_mujoco():
-    """DESIGN.md: estimator modules work on any (W, y) and never import the simulator (static check)."""
+    """Estimator modules work on any (W, y) and never import the simulator (static check; the layer rules are in
+    tests/test_architecture.py)."""
     root = Path(ident.__file__).parent
     for name in ("outliers", "uncertain", "online"):
         tree = ast.parse((root / "estimators" / f"{name}.py").read_text())
