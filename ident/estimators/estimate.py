@@ -25,7 +25,7 @@ from ident.box import Box, default_names
 from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
 from ident.estimators import registry
 from ident.estimators.cgsp import cgsp
-from ident.estimators.checks import check_bound, check_finite, check_prior, check_W_y, real_array
+from ident.estimators.checks import check_bound, check_prior, check_W_y
 from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
 
 __all__ = [

@@ -47,7 +47,9 @@ import time
 import highspy
 import numpy as np
 
-from ident.estimators.estimate import InconsistentDataError, check_finite, check_prior, real_array, estimate
+from ident.errors import InconsistentDataError
+from ident.estimators.checks import check_finite, check_prior, real_array
+from ident.estimators.estimate import estimate
 from ident.estimators.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
 from ident.numerics.lp import LPError, add_dense_rows, check
 from ident.box import Box

@@ -65,13 +65,8 @@ import numpy as np
 
 from ident.box import Box
 from ident.errors import InconsistentDataError, OutlierBudgetError
-from ident.estimators.estimate import (
-    check_bound,
-    check_prior,
-    check_W_y,
-    estimate,
-    min_consistent_bound,
-)
+from ident.estimators.checks import check_bound, check_prior, check_W_y
+from ident.estimators.estimate import estimate, min_consistent_bound
 from ident.estimators.hull import _column_scale, power2_scale, safe_lower_bound, strip_bounds
 from ident.numerics.interval import point_matvec, up
 from ident.numerics.lp import check, new_highs

@@ -71,14 +71,9 @@ import highspy
 import numpy as np
 import scipy.signal
 
-from ident.estimators.estimate import (
-    InconsistentDataError,
-    check_bound,
-    check_finite,
-    check_prior,
-    least_squares_center,
-    real_array,
-)
+from ident.errors import InconsistentDataError
+from ident.estimators.checks import check_bound, check_finite, check_prior, real_array
+from ident.estimators.estimate import least_squares_center
 from ident.processing.filtering import (
     ProcessingSettings,
     central_difference,

@@ -10,7 +10,6 @@ import pytest
 
 import ident
 from ident.estimators import registry
-from ident.estimators.estimate import _builtin_estimate
 
 
 def _problem(seed=0, m=60, p=3):
@@ -46,7 +45,7 @@ def test_builtins_are_registered_with_their_claims():
 @pytest.mark.parametrize("method", ["hull", "cgsp"])
 def test_builtins_through_the_registry_keep_their_box_and_info(method):
     W, y, b, prior, theta = _problem()
-    direct = _builtin_estimate(W, y, b, prior, method)
+    direct = registry.get(method).resolve()(W, y, b, prior)  # hull_estimator / cgsp_estimator, unchecked
     via = ident.estimate(W, y, b, prior, method=method)
     assert np.array_equal(via.lower, direct.lower) and np.array_equal(via.upper, direct.upper)
     assert set(via.info) == set(direct.info) and via.info["method"] == method
