@@ -3,8 +3,9 @@
 The layers: :mod:`ident.numerics` (interval arithmetic, HiGHS), :mod:`ident.estimators` (any ``(W, y, bound,
 prior)``), :mod:`ident.processing` (filters, the paper's chain), :mod:`ident.robots` (the H4, URDF serial robots,
 the TX40 log); :mod:`ident.box` and :mod:`ident.errors` are shared by all. ``import ident`` loads the estimators
-only; the robot-side names below (the H4 regressor and its parameters, the serial robots) are imported on first
-use (PEP 562), so that the package loads neither mujoco, python-control, matplotlib, pinocchio nor rerun.
+only; the robot-side names below (the H4 regressor and its parameters, the serial robots) and the uncertain-
+regressor hull (it uses the processing chain) are imported on first use (PEP 562), so that the package loads
+neither mujoco, python-control, matplotlib, pinocchio nor rerun.
 """
 
 from importlib import import_module
@@ -15,21 +16,21 @@ from ident.errors import (EstimatorError, InconsistentDataError, LPError, LPFall
 from ident.estimators.estimate import estimate, min_consistent_bound
 from ident.estimators.online import OnlineHull
 from ident.estimators.outliers import OutlierRows, detect_outliers, relaxed_hull
-from ident.estimators.uncertain import Distortion, IntervalEquation, interval_equation, interval_regressor, uncertain_hull
 from ident.estimators.wls import WLSResult, wls
 
 _LAZY = {
     "ident.robots.h4": ("EXTRA_NAMES", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS",
                         "inverse_dynamics", "parameter_names", "parameter_units", "regressor"),
     "ident.robots.serial": ("BaseParameters", "SerialRobot", "base_parameters"),
+    # the uncertain-regressor hull builds its interval regressor with the processing chain (scipy.signal)
+    "ident.estimators.uncertain": ("Distortion", "IntervalEquation", "interval_equation", "interval_regressor",
+                                   "uncertain_hull"),
 }
 _LAZY_NAME = {name: module for module, names in _LAZY.items() for name in names}
 
-__all__ = ["Box", "Distortion", "EstimatorError", "InconsistentDataError", "IntervalEquation", "LPError",
-           "LPFallbackWarning", "OnlineHull", "OutlierBudgetError", "OutlierRows", "ProcessingError",
-           "UnidentifiableError", "WLSResult", "detect_outliers", "estimate", "interval_equation",
-           "interval_regressor", "min_consistent_bound", "relaxed_hull", "uncertain_hull", "wls",
-           *sorted(_LAZY_NAME)]
+__all__ = ["Box", "EstimatorError", "InconsistentDataError", "LPError", "LPFallbackWarning", "OnlineHull",
+           "OutlierBudgetError", "OutlierRows", "ProcessingError", "UnidentifiableError", "WLSResult",
+           "detect_outliers", "estimate", "min_consistent_bound", "relaxed_hull", "wls", *sorted(_LAZY_NAME)]
 
 
 def __getattr__(name: str):
