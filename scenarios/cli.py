@@ -308,7 +308,7 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
                               f"{name} {value}")
     if not Path(urdf).is_file():
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
-    from ident.serial import SerialRobot
+    from ident.robots.serial import SerialRobot
 
     try:
         n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints

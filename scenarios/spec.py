@@ -35,7 +35,7 @@ DEFAULTS: dict = {
     "encoder": {"counts_per_turn": 20000},
     "bound": {"allowance": 0.5},  # assumed raw-row bound = noise.bound + allowance [N m]
     # torque_timing "hold": the simulator (like a joint controller's log of its commands) holds each torque over
-    # its step, so the regressor is evaluated at mid-step (ident.filtering.derivatives)
+    # its step, so the regressor is evaluated at mid-step (ident.processing.filtering.derivatives)
     "processing": {"position_cutoff_hz": 20.0, "butter_order": 4, "decimation": 10, "numtaps": 41,
                    "fir_cutoff": 0.8, "speed_threshold": 0.05, "torque_timing": "hold"},
     "prior": {"lower": 0.0, "upper": 2.0},

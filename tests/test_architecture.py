@@ -104,7 +104,7 @@ def test_the_graph_sees_the_known_edges():
     """The checker itself: edges that exist must be found (a graph that finds nothing would pass everything)."""
     assert "scenarios.registry" in GRAPH["scenarios.runner"]
     assert "scenarios.kinds.paper" in GRAPH["scenarios.registry"]
-    assert "ident.filtering" in GRAPH["ident.processing"]
+    assert "ident.processing.filtering" in GRAPH["ident.processing.processing"]
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

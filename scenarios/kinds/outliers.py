@@ -14,8 +14,8 @@ import numpy as np
 
 import ident
 import sim
-from ident.outliers import OutlierBudgetError, relaxed_hull
-from ident.processing import build_equation
+from ident.estimators.outliers import OutlierBudgetError, relaxed_hull
+from ident.processing.processing import build_equation
 from scenarios import report
 from scenarios.experiment import ExperimentRun, estimate_hull, run_experiment
 from scenarios.rundir import save_run_files, sim_progress

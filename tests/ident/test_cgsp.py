@@ -15,9 +15,9 @@ import pytest
 from flint import fmpq, fmpq_mat
 
 import ident
-from ident.cgsp import approximate_gram_inverse, cgsp, cgsp_dense
-from ident.hull import strip_bounds
-from ident.interval import point_matvec, sub
+from ident.estimators.cgsp import approximate_gram_inverse, cgsp, cgsp_dense
+from ident.estimators.hull import strip_bounds
+from ident.numerics.interval import point_matvec, sub
 
 
 def q(x: float) -> fmpq:

@@ -1,7 +1,4 @@
-"""The 14 base parameters of the H4 inverse dynamic model (paper eq. 18) and the Box type.
-
-The order is defined here once; every other module refers to :data:`PARAMETER_NAMES`.
-"""
+"""The Box type: an axis-aligned box of parameter vectors."""
 
 from __future__ import annotations
 
@@ -9,22 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-PARAMETER_NAMES: tuple[str, ...] = (
-    "Imot1", "Imot2", "Imot3", "Imot4",  # motor + arm + lumped forearm inertia about the motor axis [kg m^2]
-    "Mnac",  # nacelle mass [kg]
-    "Ibc",  # nacelle inertia about the vertical axis through D [kg m^2]
-    "Fv1", "Fv2", "Fv3", "Fv4",  # viscous friction [N m s/rad]
-    "Fs1", "Fs2", "Fs3", "Fs4",  # Coulomb friction [N m]
-)
-PARAMETER_UNITS: tuple[str, ...] = ("kg m^2",) * 4 + ("kg", "kg m^2") + ("N m s/rad",) * 4 + ("N m",) * 4
-N_PARAMETERS = len(PARAMETER_NAMES)
-
-# What a designer knows before identification: the paper's a priori values (Table 1: Imot 0.012 kg m^2,
-# Mnac 1.0 kg; Ibc taken as 0.003 kg m^2, Table 2's order, since the a priori 0.0008 ignores the lateral bars)
-# and frictions of the order of its Table 2. Used for control, feed-forward and trajectory checks; never
-# as a truth.
-NOMINAL_PARAMETERS: tuple[float, ...] = (0.012, 0.012, 0.012, 0.012, 1.0, 0.003,
-                                         0.16, 0.06, 0.09, 0.09, 1.15, 1.10, 0.72, 0.99)
+from ident.robots.h4 import PARAMETER_NAMES
 
 
 @dataclass(frozen=True)

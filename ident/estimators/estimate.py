@@ -4,9 +4,9 @@ Error model (paper sec. 3): ``|y_k - W_k theta| <= bound_k`` for every row k, ``
 The feasible set ``S = {theta in Q : |y - W theta| <= bound}`` is a polytope; the methods return boxes that
 contain it:
 
-* ``"hull"`` (:mod:`ident.hull`): the exact interval hull of S, 2p linear programs with rigorous (safe
+* ``"hull"`` (:mod:`ident.estimators.hull`): the exact interval hull of S, 2p linear programs with rigorous (safe
   dual) endpoints; shrinks like 1/N.
-* ``"cgsp"`` (:mod:`ident.cgsp`): the paper's preconditioned interval Gauss-Seidel on Rump's system;
+* ``"cgsp"`` (:mod:`ident.estimators.cgsp`): the paper's preconditioned interval Gauss-Seidel on Rump's system;
   equals ``hull(W^+ [Y]) & Q`` for a point regressor and does not shrink with N.
 
 Both are guaranteed outer enclosures. An empty S raises :class:`InconsistentDataError` (only when the
@@ -21,10 +21,11 @@ import warnings
 
 import numpy as np
 
-from ident.cgsp import cgsp
-from ident.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
-from ident.lpsolver import LPError, LPFallbackWarning
-from ident.parameters import PARAMETER_NAMES, Box
+from ident.box import Box
+from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
+from ident.estimators.cgsp import cgsp
+from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
+from ident.robots.h4 import PARAMETER_NAMES
 
 __all__ = [
     "METHODS",
@@ -39,28 +40,6 @@ __all__ = [
 METHODS = ("hull", "cgsp")
 
 
-class InconsistentDataError(ValueError):
-    """The data contradict the error bound: no theta in the prior satisfies ``|y - W theta| <= bound``.
-
-    ``min_bound`` is the smallest scalar bound that makes the data consistent with the prior (rounded up,
-    so ``bound = min_bound`` is guaranteed consistent); ``bound`` the bound that was given (scalar or the
-    largest per-row value); ``scale_lower`` a proven lower bound of the factor by which the given bound(s)
-    must be multiplied to become consistent (``> 1``).
-    """
-
-    def __init__(self, message: str, *, min_bound: float, bound: float, scale_lower: float) -> None:
-        super().__init__(message)
-        self.min_bound = float(min_bound)
-        self.bound = float(bound)
-        self.scale_lower = float(scale_lower)
-
-
-class UnidentifiableError(ValueError):
-    """The data do not determine some parameters (rank-deficient regressor); ``names`` lists them."""
-
-    def __init__(self, message: str, *, names: tuple[str, ...]) -> None:
-        super().__init__(message)
-        self.names = tuple(names)
 
 
 # ------------------------------------------------------------------------------------------- validation
@@ -257,7 +236,7 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     change of the problem by the rounding of the converted data (``tests/ident/test_units.py`` states and
     checks the tolerance); the LPs are scaled inside (rows by their bound, then columns, powers of two).
     When HiGHS cannot solve an LP, the affected endpoints are coarser safe bounds or the prior's and a
-    :class:`~ident.lpsolver.LPFallbackWarning` says which (``info['fallbacks']``); a fallback never makes a
+    :class:`~ident.numerics.lp.LPFallbackWarning` says which (``info['fallbacks']``); a fallback never makes a
     box tighter.
     """
     t0 = time.perf_counter()

@@ -11,7 +11,7 @@ holding the rows that endpoint needed so far (its working set) and that model's 
    larger set);
 3. the other endpoints get their violated new rows added to their own model and are re-solved from their
    previous optimal basis (dual simplex: few iterations); their new points are checked against all rows seen
-   so far (constraint generation, as :func:`ident.hull.interval_hull`), the worst violated rows are added and
+   so far (constraint generation, as :func:`ident.estimators.hull.interval_hull`), the worst violated rows are added and
    the LPs re-solved until no row is violated by more than ``violation_tol`` times its half-width.
 
 Every endpoint returned is a Neumaier-Shcherbina safe bound of its model's LP (rows outward rounded, duals
@@ -23,14 +23,14 @@ was optimal for that objective; the working sets are a few hundred rows, so memo
 
 When a model becomes infeasible, or the safe bounds of two endpoints cross (``lower_i > upper_i``, itself a
 proof that the rows seen are inconsistent), the verdict is the batch estimator's: a Chebyshev LP over all rows
-seen decides (:func:`ident.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
+seen decides (:func:`ident.estimators.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
 is raised and **the rejected block is dropped**: the object is left exactly as before the update (rows seen,
 box, working sets; the HiGHS models that had taken rows of the block are rebuilt from their working sets), so
 later consistent blocks can still be added. If it is not proven (the set is thinner than the LP tolerance),
 the box of the batch :func:`ident.estimate` on all rows seen is returned (it encloses a slightly inflated set)
 and ``info['fallback'] = 'batch'``.
 
-Scaling (as :func:`ident.hull.interval_hull`): each model sees ``(theta - c_j) / d`` with ``c_j`` the
+Scaling (as :func:`ident.estimators.hull.interval_hull`): each model sees ``(theta - c_j) / d`` with ``c_j`` the
 midpoint of the box when the model is made (the shift keeps the row bounds of the size of the strips,
 however narrow), rows scaled by the power of two nearest the inverse of their half-width, and the column
 scale ``d`` of the first block after that row scaling; each model's cost is ``+-1`` on its scaled column (the
@@ -47,10 +47,10 @@ import time
 import highspy
 import numpy as np
 
-from ident.estimate import InconsistentDataError, _check_finite, _check_prior, _real_array, estimate
-from ident.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
-from ident.lpsolver import LPError, add_dense_rows, check
-from ident.parameters import Box
+from ident.estimators.estimate import InconsistentDataError, _check_finite, _check_prior, _real_array, estimate
+from ident.estimators.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
+from ident.numerics.lp import LPError, add_dense_rows, check
+from ident.box import Box
 
 __all__ = ["OnlineHull"]
 

@@ -11,7 +11,7 @@ this interval meets ``[y_k - b_k, y_k + b_k]``:
 
     S = {theta in Q : (Wc - D) theta <= y + b  and  (Wc + D) theta >= y - b},
 
-a polytope given by 2N linear inequalities. Its exact hull is the 2p LPs of :func:`ident.hull.interval_hull`
+a polytope given by 2N linear inequalities. Its exact hull is the 2p LPs of :func:`ident.estimators.hull.interval_hull`
 on the stacked rows ``A = [W_lo; W_hi]`` with ``W_lo = down(Wc - D)``, ``W_hi = up(Wc + D)`` (outward rounded,
 so ``[W_lo, W_hi]`` contains ``[W]`` and the set can only grow). Each stacked row has one finite side; the other
 side is set to the range of that row over the prior box, computed by interval arithmetic and rounded outward
@@ -22,7 +22,7 @@ with ``L_k > y_k + b_k`` (or ``U_k < y_k - b_k``) proves S empty. Endpoints are 
 emptiness is decided by a one-sided Chebyshev LP (``min s : W_lo theta - s b <= y, W_hi theta + s b >= y``):
 a safe lower bound of ``s* > 1`` proves S empty, a verified point with ``s <= 1`` proves it non-empty.
 
-**Where [W] comes from (the H4 chain of :mod:`ident.processing`).** The estimated states
+**Where [W] comes from (the H4 chain of :mod:`ident.processing.processing`).** The estimated states
 ``s_est = P(q_meas)`` (Butterworth filtfilt + central differences, a linear operator P) differ from the true
 ones by ``P(e) + (P(q) - s_true)``: the encoder error ``e`` (``|e| <= pi / counts``, rounding to the nearest
 count) and the filter's distortion of the true motion. After the parallel filter h (applied to both sides):
@@ -71,7 +71,7 @@ import highspy
 import numpy as np
 import scipy.signal
 
-from ident.estimate import (
+from ident.estimators.estimate import (
     InconsistentDataError,
     _check_bound,
     _check_finite,
@@ -79,7 +79,7 @@ from ident.estimate import (
     _least_squares_center,
     _real_array,
 )
-from ident.filtering import (
+from ident.processing.filtering import (
     ProcessingSettings,
     central_difference,
     default_edge_samples,
@@ -88,10 +88,10 @@ from ident.filtering import (
     parallel_filter,
     second_difference,
 )
-from ident.hull import _column_scale, _new_highs, interval_hull, power2_scale, shifted_safe_bound, strip_bounds
-from ident.interval import down, nonneg_upper, point_matmul, point_matvec, up
-from ident.lpsolver import LPError, LPFallbackWarning, add_dense_rows, check
-from ident.parameters import Box
+from ident.estimators.hull import _column_scale, _new_highs, interval_hull, power2_scale, shifted_safe_bound, strip_bounds
+from ident.numerics.interval import down, nonneg_upper, point_matmul, point_matvec, up
+from ident.numerics.lp import LPError, LPFallbackWarning, add_dense_rows, check
+from ident.box import Box
 
 __all__ = [
     "Distortion",
@@ -292,7 +292,7 @@ def encoder_radii(counts_per_turn: int, dt: float, cutoff_hz: float, order: int 
     """Rigorous radii ``(r_q, r_qd, r_qdd)`` [rad, rad/s, rad/s^2] of the encoder part of the state estimates.
 
     counts_per_turn : encoder counts per turn (error ``|e| <= pi / counts``, rounding to the nearest count);
-    dt, cutoff_hz, order : the processing of :func:`ident.filtering.derivatives`; n : the record's length in
+    dt, cutoff_hz, order : the processing of :func:`ident.processing.filtering.derivatives`; n : the record's length in
     samples (default: long).
 
     The estimate is linear in the measured angles, ``s = P q_meas``, so the encoder part is ``P e`` and
@@ -410,8 +410,8 @@ def filter_interval(Wc, D, y, bound, factor: int, taps):
     """The parallel filter of an interval equation: ``h * [Wc ± D] ⊆ [h * Wc ± (|h| * D + rounding)]``.
 
     Wc, D : (4n, p); y : (4n,); bound : scalar or (4n,); factor, taps : decimation and FIR as in
-    :func:`ident.filtering.parallel_filter` (which computes every filtered quantity and its rounding bound).
-    Returns ``(Wc_f, D_f, y_f, bound_f, fe)`` with ``fe`` the :class:`~ident.filtering.FilteredEquation` of the
+    :func:`ident.processing.filtering.parallel_filter` (which computes every filtered quantity and its rounding bound).
+    Returns ``(Wc_f, D_f, y_f, bound_f, fe)`` with ``fe`` the :class:`~ident.processing.filtering.FilteredEquation` of the
     centre (sample_index, rows, ...). Rigorous: the radius adds the floating-point error bounds of ``h * Wc``
     and of ``|h| * D`` and is rounded up.
     """
