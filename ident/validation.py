@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-__all__ = ["as_float_array", "check_finite", "joint_array", "positive", "positive_int"]
+__all__ = ["as_float_array", "check_finite", "positive", "positive_int"]
 
 
 def as_float_array(x, name: str) -> np.ndarray:
@@ -49,11 +49,3 @@ def positive_int(x, name: str, minimum: int = 1) -> int:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {x}")
     return int(x)
 
-
-def joint_array(x, name: str = "q", n_joints: int = 4) -> np.ndarray:
-    """A finite float array of shape (n, n_joints): one row per sample, one column per joint."""
-    arr = as_float_array(x, name)
-    if arr.ndim != 2 or arr.shape[1] != n_joints:
-        raise ValueError(f"{name} must have shape (n, {n_joints}), got {arr.shape}")
-    check_finite(arr, name)
-    return arr

@@ -246,7 +246,8 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
 # numtaps_per_decimation x decimation + 1 taps with its -6 dB point at fir_cutoff x the decimated Nyquist
 # frequency, decimation; base parameters from base_samples random states (seed).
 URDF_PROCESSING = {"cutoff_hz": 100.0, "butter_order": 4, "decimation": 100, "numtaps_per_decimation": 4,
-                   "fir_cutoff": 0.8, "speed_threshold": 0.05, "base_samples": 200, "seed": 0}
+                   "fir_cutoff": 0.8, "speed_threshold": 0.05, "base_samples": 200, "seed": 0,
+                   "torque_timing": "sample"}  # the regressor at the sampling instants (as the tx40 scenario)
 MASS_FACTOR = 2.0  # default total mass of the prior: the URDF's total mass times this
 OFFSET_FRACTION = 0.2  # |off_i| <= this x the URDF effort limit
 
@@ -344,7 +345,8 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     prior = ident.Box(blo, bhi, names=base.names)
     settings = {"cutoff_hz": cutoff_hz, "decimation": decimation,
                 "numtaps": int(p["numtaps_per_decimation"]) * decimation + 1, "fir_cutoff": p["fir_cutoff"],
-                "speed_threshold": p["speed_threshold"], "butter_order": p["butter_order"]}
+                "speed_threshold": p["speed_threshold"], "butter_order": p["butter_order"],
+                "torque_timing": p["torque_timing"]}
     eq = process(robot, base, q, tau, dt, theta_abs_max=np.maximum(np.abs(blo), np.abs(bhi)), **settings)
     if len(eq) == 0:
         raise sim.DatasetError(f"CSV {str(path)!r} gives no processed row (too short, or too slow: rows below "

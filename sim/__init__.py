@@ -1,47 +1,61 @@
-"""h4bench simulation: the H4 in MuJoCo, its geometry and kinematics, ground truth."""
+"""h4bench simulation: the H4 in MuJoCo, its geometry and kinematics, ground truth.
 
-from sim.kinematics import (
-    Jacobians,
-    KinematicsError,
-    cartesian_motion,
-    forward_kinematics,
-    inverse_kinematics,
-    jacobian_dot,
-    jacobians,
-    singularity_measure,
-)
-from sim.model import DEFAULT_MODEL_PATH, H4Geometry, ModelError, apply_solver_constants, load_model
-from sim.truth import TRUE_PARAMETER_ORDER, nacelle_mass_matrix, true_parameters
+The public names below are resolved on first use (PEP 562 module ``__getattr__``): ``import sim`` loads no
+sub-module, ``import sim.validation`` or ``import sim.noise`` loads only what that module needs, and
+python-control (with the matplotlib it imports) is loaded only when a controller is designed.
+"""
 
-__all__ = [
-    "DEFAULT_MODEL_PATH", "H4Geometry", "Jacobians", "KinematicsError", "ModelError", "TRUE_PARAMETER_ORDER",
-    "apply_solver_constants",
-    "cartesian_motion", "forward_kinematics", "inverse_kinematics", "jacobian_dot", "jacobians", "load_model",
-    "nacelle_mass_matrix", "singularity_measure", "true_parameters",
-]
-from sim.controller import ControllerDesign, JointController, VelocityFilter, design_joint_controller  # noqa: E402
-from sim.dataset import Dataset, DatasetError, GroundTruth, atomic_write_bytes  # noqa: E402
-from sim.simulate import (  # noqa: E402
-    NOISE_SHAPES,
-    PrecomputedTorqueError,
-    SimulationError,
-    SimulationSettings,
-    TorqueNoise,
-    axis_inertia,
-    default_controller,
-    quantise,
-    simulate,
-)
+from __future__ import annotations
 
-__all__ += [
-    "ControllerDesign", "Dataset", "DatasetError", "GroundTruth", "JointController", "NOISE_SHAPES",
-    "PrecomputedTorqueError",
-    "SimulationError", "SimulationSettings", "TorqueNoise", "VelocityFilter", "atomic_write_bytes", "axis_inertia",
-    "default_controller", "design_joint_controller", "quantise", "simulate",
-]
-from sim.variants import broken_hypotheses_model, randomised_model, unbalanced_arms_model  # noqa: E402
+import importlib
+import sys
+import types
 
-__all__ += ["broken_hypotheses_model", "randomised_model", "unbalanced_arms_model"]
-from sim.noise import ErrorStream, NoiseModelError, TorqueError, realistic_drive  # noqa: E402
+_LAZY = {
+    "sim.kinematics": ("Jacobians", "KinematicsError", "cartesian_motion", "forward_kinematics", "inverse_kinematics",
+                       "jacobian_dot", "jacobians", "singularity_measure"),
+    "sim.model": ("DEFAULT_MODEL_PATH", "H4Geometry", "ModelError", "apply_solver_constants", "load_model"),
+    "sim.truth": ("TRUE_PARAMETER_ORDER", "nacelle_mass_matrix", "true_parameters"),
+    "sim.controller": ("JointController", "VelocityFilter"),
+    "sim.control_design": ("ControllerDesign", "design_joint_controller"),
+    "sim.dataset": ("Dataset", "DatasetError", "GroundTruth", "atomic_write_bytes"),
+    "sim.simulate": ("SimulationSettings", "axis_inertia", "default_controller", "quantise", "simulate"),
+    "sim.validation": ("N_JOINTS", "SimulationError"),
+    "sim.noise": ("ErrorStream", "NOISE_SHAPES", "NoiseModelError", "PrecomputedTorqueError", "TorqueError",
+                  "TorqueNoise", "realistic_drive"),
+    "sim.variants": ("broken_hypotheses_model", "randomised_model", "unbalanced_arms_model"),
+}
+_MODULE_OF = {name: module for module, names in _LAZY.items() for name in names}
 
-__all__ += ["ErrorStream", "NoiseModelError", "TorqueError", "realistic_drive"]
+_SUBMODULES = ("control_design", "controller", "csvlog", "dataset", "kinematics", "model", "noise", "truth",
+               "validation", "variants")
+
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:  # ``import sim; sim.kinematics.f(...)`` keeps working
+        return importlib.import_module(f"sim.{name}")
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'sim' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _SimModule(types.ModuleType):
+    """``sim.simulate`` is the function :func:`sim.simulate.simulate` (as when this package imported it eagerly),
+    also after the import system binds the sub-module of the same name to the package."""
+
+    def __setattr__(self, name, value):
+        if name == "simulate" and isinstance(value, types.ModuleType):
+            value = value.simulate
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _SimModule

@@ -22,7 +22,17 @@ from sim.csvlog import DatasetError, read_log  # DatasetError lives with the rea
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically: a temp file in the same folder, fsync, then os.replace."""
+    """Write ``data`` to ``path`` atomically: a temp file in the same folder, fsync, then os.replace.
+
+    Parameters
+    ----------
+    path : file to write (its folder must exist)
+    data : the bytes
+
+    Returns
+    -------
+    None
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -50,6 +60,17 @@ def _save_npz(path: Path, arrays: dict) -> None:
 
 
 def json_default(obj):
+    """JSON encoder fallback (``json.dumps(default=...)``): numpy arrays, numpy scalars and paths as
+    lists, numbers and strings.
+
+    Parameters
+    ----------
+    obj : the object json cannot encode
+
+    Returns
+    -------
+    a JSON-able value (TypeError if there is none)
+    """
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, (np.floating, np.integer, np.bool_)):

@@ -62,6 +62,15 @@ def inverse_kinematics(geometry: H4Geometry, x) -> np.ndarray:
     ``c_i = (L^2 + |P_iA_i|^2 - l^2) / 2L``. Of the two solutions we take ``q = atan2(b, a) - acos(c / rho)``:
     the 'elbow out' branch, whose arm tip stays outward of the forearm (q = 0 at the home pose). Raises
     :class:`KinematicsError` naming the samples and chains a forearm cannot reach (|c/rho| > 1).
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    x : (n, 4) or (4,) nacelle poses (x, y, z [m], theta [rad])
+
+    Returns
+    -------
+    (n, 4) or (4,) motor angles q [rad] (the shape of x)
     """
     _check_geometry(geometry)
     x2, single = _as_samples("x", x)
@@ -109,7 +118,19 @@ def _jacobians(geometry: H4Geometry, q: np.ndarray, x: np.ndarray) -> Jacobians:
 
 
 def jacobians(geometry: H4Geometry, q, x=None) -> Jacobians:
-    """Jx, Jq and J at motor angles q (n, 4); x (n, 4) is computed by forward kinematics when omitted."""
+    """Jx, Jq and J at motor angles q (n, 4); x (n, 4) is computed by forward kinematics when omitted.
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    q : (n, 4) motor angles [rad]
+    x : (n, 4) nacelle poses (x, y, z [m], theta [rad]), or None (forward kinematics of q)
+
+    Returns
+    -------
+    Jacobians
+        Jx (n, 4, 4), Jq (n, 4) and J = Jx^-1 diag(Jq) (n, 4, 4), ``xd = J qd``.
+    """
     _check_geometry(geometry)
     q2, single = _as_samples("q", q)
     x2 = np.atleast_2d(forward_kinematics(geometry, q2)) if x is None else _as_samples("x", x)[0]
@@ -128,6 +149,18 @@ def forward_kinematics(geometry: H4Geometry, q, x0=None, tol: float = 1e-13, max
     Converged when ``max |q - q_n| <= tol`` [rad] for every sample; a step that leaves the workspace is halved.
     Raises :class:`KinematicsError` naming the samples that did not converge in ``max_iter`` iterations
     (singular or unreachable motor angles).
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    q : (n, 4) or (4,) motor angles [rad]
+    x0 : start pose(s) (4,) or (n, 4), or None (the home pose)
+    tol : convergence tolerance on the motor angles [rad]
+    max_iter : iteration limit
+
+    Returns
+    -------
+    (n, 4) or (4,) nacelle poses (x, y, z [m], theta [rad]) (the shape of q)
     """
     _check_geometry(geometry)
     q2, single = _as_samples("q", q)
@@ -181,6 +214,17 @@ def jacobian_dot(geometry: H4Geometry, q, qd, x=None) -> np.ndarray:
 
     From ``Jx J = diag(Jq)``: ``Jd = Jx^-1 (diag(Jqd) - Jxd J)``, with Jxd and Jqd the analytic derivatives
     of the rows of eq. 11 and eq. 12 (AB_d = u x PB qd - (pd + thetad z x DC), DC_d = thetad z x DC).
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    q : (n, 4) motor angles [rad]
+    qd : (n, 4) motor velocities [rad/s]
+    x : (n, 4) nacelle poses, or None (forward kinematics of q)
+
+    Returns
+    -------
+    (n, 4, 4) dJ/dt [m/rad/s for the rows x, y, z; 1/s for theta]
     """
     _check_geometry(geometry)
     q2, single = _as_samples("q", q)
@@ -209,7 +253,18 @@ def _jacobian_dot(geometry: H4Geometry, jac: Jacobians, qd: np.ndarray) -> np.nd
 
 
 def cartesian_motion(geometry: H4Geometry, q, qd, qdd, x=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Nacelle pose, velocity and acceleration (each (n, 4)): x = FK(q), xd = J qd, xdd = J qdd + Jd qd."""
+    """Nacelle pose, velocity and acceleration (each (n, 4)): x = FK(q), xd = J qd, xdd = J qdd + Jd qd.
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    q, qd, qdd : (n, 4) motor angles [rad], velocities [rad/s], accelerations [rad/s^2]
+    x : (n, 4) nacelle poses, or None (forward kinematics of q)
+
+    Returns
+    -------
+    (x, xd, xdd) : each (n, 4), pose (x, y, z [m], theta [rad]) and its first and second time derivatives
+    """
     _check_geometry(geometry)
     q2, single = _as_samples("q", q)
     qd2, _ = _as_samples("qd", qd)
@@ -228,7 +283,17 @@ def cartesian_motion(geometry: H4Geometry, q, qd, qdd, x=None) -> tuple[np.ndarr
 
 
 def singularity_measure(geometry: H4Geometry, x) -> np.ndarray:
-    """cond(Jx) (2-norm) at poses x: (n,) or scalar. Large values mean close to a singularity."""
+    """cond(Jx) (2-norm) at poses x: (n,) or scalar. Large values mean close to a singularity.
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    x : (n, 4) or (4,) nacelle poses (x, y, z [m], theta [rad])
+
+    Returns
+    -------
+    (n,) or float condition number of Jx (>= 1)
+    """
     _check_geometry(geometry)
     x2, single = _as_samples("x", x)
     q, ratio = _ik(geometry, x2)

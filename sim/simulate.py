@@ -13,7 +13,9 @@ The torque error follows a small protocol, so that structured error models (anot
 ``stream = noise.start(t, rng)`` (t (n,) sample times from 0 [s], rng a numpy Generator) gives
 ``stream.at(k, q, tau_cmd) -> (4,)`` [N m] per sample (q (4,) true motor angles [rad], tau_cmd (4,) the clipped
 command) and ``stream.measured(tau_cmd (n, 4)) -> (n, 4)`` the logged torques; ``noise.bound`` [N m] bounds
-``|applied - logged|`` and ``noise.describe()`` is a JSON-able dict. :class:`TorqueNoise` implements it.
+``|applied - logged|`` and ``noise.describe()`` is a JSON-able dict. :mod:`sim.noise` implements it
+(:class:`~sim.noise.TorqueNoise`, one shape; :class:`~sim.noise.TorqueError`, a sum of components); both are
+re-exported here.
 
 Each sample is recorded AT the sampled state: ``mj_forward`` with the new command gives MuJoCo's
 acceleration, applied (actuator-clipped) torque and loop violation there; then the integrator advances
@@ -27,97 +29,34 @@ from __future__ import annotations
 import functools
 import importlib.metadata
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
-from sim.controller import JointController, VelocityFilter, design_joint_controller
+from sim.controller import JointController, VelocityFilter
 from sim.dataset import Dataset, GroundTruth
 from sim.kinematics import _jacobians, forward_kinematics
 from sim.model import NACELLE_JOINTS, H4Geometry
+from sim.noise.shapes import NOISE_SHAPES, PrecomputedTorqueError, TorqueNoise
 from sim.truth import TRUE_PARAMETER_ORDER, true_parameters
+from sim.validation import N_JOINTS, SimulationError
 
-NOISE_SHAPES = ("uniform", "square", "sine", "array", "none")
-
-
-class SimulationError(ValueError):
-    """Bad simulation input (reference, noise, settings)."""
-
-
-@dataclass(frozen=True)
-class TorqueNoise:
-    """Bounded torque noise ``|e| <= bound`` [N m] added to the commanded torque.
-
-    shape: ``uniform`` (i.i.d. in [-bound, bound]), ``square`` (the worst case: +-bound square wave of
-    ``frequency_hz`` with a random phase per joint), ``sine`` (bound sin(2 pi f t + phase)), ``array``
-    (user-provided ``values`` (n, 4), checked against the bound) or ``none``.
-    """
-
-    bound: float = 0.0
-    shape: str = "uniform"
-    frequency_hz: float = 5.0
-    values: np.ndarray | None = field(default=None, compare=False)
-
-    def __post_init__(self) -> None:
-        if self.shape not in NOISE_SHAPES:
-            raise SimulationError(f"noise shape must be one of {NOISE_SHAPES}, got {self.shape!r}")
-        if not (np.isfinite(self.bound) and self.bound >= 0):
-            raise SimulationError(f"noise bound must be a finite number >= 0 [N m], got {self.bound!r}")
-        if self.shape in ("square", "sine") and not (self.frequency_hz > 0):
-            raise SimulationError(f"noise frequency_hz must be > 0, got {self.frequency_hz!r}")
-        if self.shape == "array" and self.values is None:
-            raise SimulationError("noise shape 'array' needs values of shape (n, 4)")
-
-    def sample(self, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Noise (n, 4) [N m] at sample times t (n,)."""
-        n = t.size
-        if self.shape == "none" or self.bound == 0.0 and self.shape != "array":
-            return np.zeros((n, 4))
-        if self.shape == "uniform":
-            return rng.uniform(-self.bound, self.bound, (n, 4))
-        phase = rng.uniform(0.0, 2 * np.pi, 4)
-        arg = 2 * np.pi * self.frequency_hz * t[:, None] + phase
-        if self.shape == "square":
-            return self.bound * np.where(np.sin(arg) >= 0.0, 1.0, -1.0)
-        if self.shape == "sine":
-            return self.bound * np.sin(arg)
-        values = np.asarray(self.values, dtype=float)
-        if values.shape != (n, 4):
-            raise SimulationError(f"noise values must have shape ({n}, 4) (one per sample and joint), got {values.shape}")
-        if not np.all(np.isfinite(values)) or np.abs(values).max() > self.bound:
-            raise SimulationError(f"noise values must be finite and within +-bound = {self.bound} N m, "
-                                  f"got max |e| = {np.nanmax(np.abs(values)):.6g}")
-        return values.copy()
-
-    def describe(self) -> dict:
-        d = asdict(self)
-        d.pop("values")
-        return d
-
-    def start(self, t: np.ndarray, rng: np.random.Generator) -> "PrecomputedTorqueError":
-        """The per-sample error stream for sample times t (n,) [s] (the draws of :meth:`sample`)."""
-        return PrecomputedTorqueError(self.sample(np.asarray(t, dtype=float), rng))
-
-
-class PrecomputedTorqueError:
-    """A torque-error stream from precomputed values e (n, 4) [N m]: ``at(k, q, tau_cmd) = e[k]``; the logged
-    torque is the command itself."""
-
-    __slots__ = ("e",)
-
-    def __init__(self, e: np.ndarray) -> None:
-        self.e = np.asarray(e, dtype=float)
-
-    def at(self, k: int, q: np.ndarray, tau_cmd: np.ndarray) -> np.ndarray:
-        return self.e[k]
-
-    def measured(self, tau_cmd: np.ndarray) -> np.ndarray:
-        return np.array(tau_cmd, dtype=float)
-
+__all__ = ["NOISE_SHAPES", "PrecomputedTorqueError", "SimulationError", "SimulationSettings", "TorqueNoise",
+           "axis_inertia", "default_controller", "quantise", "simulate"]
 
 def quantise(q: np.ndarray, counts_per_turn: int | None) -> np.ndarray:
-    """Encoder reading of angles q [rad]: rounded to the nearest count (resolution 2 pi / counts)."""
+    """Encoder reading of angles q [rad]: rounded to the nearest count (resolution 2 pi / counts).
+
+    Parameters
+    ----------
+    q : array of angles [rad]
+    counts_per_turn : counts per turn; None or 0: exact angles
+
+    Returns
+    -------
+    array of the shape of q [rad]
+    """
     if not counts_per_turn:
         return np.array(q, dtype=float)
     res = 2 * np.pi / counts_per_turn
@@ -125,7 +64,18 @@ def quantise(q: np.ndarray, counts_per_turn: int | None) -> np.ndarray:
 
 
 def axis_inertia(geometry: H4Geometry, theta, x=None) -> np.ndarray:
-    """Inertia seen by each motor at pose x (default home) [kg m^2]: Imot_i + (J^T M J)_ii."""
+    """Inertia seen by each motor at pose x (default home) [kg m^2]: Imot_i + (J^T M J)_ii.
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    theta : (>= 6,) parameters (Ia1..Ia4 [kg m^2], M [kg], Mz [kg] first)
+    x : (4,) nacelle pose (x, y, z [m], rotation [rad]); default ``geometry.x_home``
+
+    Returns
+    -------
+    (4,) axis inertia [kg m^2]
+    """
     theta = np.asarray(theta, dtype=float)
     x = geometry.x_home if x is None else np.asarray(x, dtype=float)
     from sim.kinematics import inverse_kinematics
@@ -138,7 +88,24 @@ def axis_inertia(geometry: H4Geometry, theta, x=None) -> np.ndarray:
 
 def default_controller(geometry: H4Geometry, theta_nominal, dt: float = 1e-3, bandwidth_hz: float = 15.0,
                        velocity_filter_hz: float = 100.0):
-    """Joint controller designed with python-control from a *nominal* parameter vector (never the truth)."""
+    """Joint controller designed with python-control from a *nominal* parameter vector (never the truth).
+
+    Parameters
+    ----------
+    geometry : H4Geometry
+    theta_nominal : (14,) nominal parameters (the order of :data:`sim.TRUE_PARAMETER_ORDER`; Ia1..Ia4, M, Mz
+        give the axis inertias, Fv1..Fv4 the viscous friction)
+    dt : sample period [s]
+    bandwidth_hz : tracking bandwidth of the design [Hz]
+    velocity_filter_hz : cut-off of the velocity estimate the law receives [Hz]
+
+    Returns
+    -------
+    (ControllerDesign, JointController)
+        The design (gains, margins) and the law with its gains.
+    """
+    from sim.control_design import design_joint_controller  # noqa: PLC0415 (python-control on use only)
+
     design = design_joint_controller(axis_inertia(geometry, theta_nominal), np.asarray(theta_nominal)[6:10],
                                      bandwidth_hz=bandwidth_hz, dt=dt, velocity_filter_hz=velocity_filter_hz)
     return design, JointController.from_design(design)
@@ -171,8 +138,8 @@ def _reference_arrays(reference):
         raise SimulationError(f"reference must have arrays t, q, qd, qdd (a Trajectory), got {type(reference).__name__}") from exc
     n = t.size
     for name, arr in (("q", q), ("qd", qd), ("qdd", qdd)):
-        if arr.shape != (n, 4) or not np.all(np.isfinite(arr)):
-            raise SimulationError(f"reference.{name} must be finite with shape ({n}, 4), got {arr.shape}")
+        if arr.shape != (n, N_JOINTS) or not np.all(np.isfinite(arr)):
+            raise SimulationError(f"reference.{name} must be finite with shape ({n}, {N_JOINTS}), got {arr.shape}")
     if n < 3 or np.any(np.diff(t) <= 0):
         raise SimulationError("reference.t must be strictly increasing with at least 3 samples")
     return t, q, qd, qdd
@@ -190,6 +157,21 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     with nominal parameters). progress : optional callable(k, n) called every 1000 samples. theta_true : the
     truth to record when the model is a variant whose parameters ``true_parameters`` cannot read (e.g. the
     extended structure's 22 values of :func:`sim.broken_hypotheses_model`).
+
+    Parameters
+    ----------
+    model : mujoco.MjModel of the H4 (its timestep divides the reference's sample period)
+    reference : a Trajectory-like object with t (n,) [s], q (n, 4) [rad], qd (n, 4) [rad/s], qdd (n, 4) [rad/s^2]
+    noise : torque-error model (the protocol above), default none
+    controller, feedforward, progress, theta_true : see above
+    settings : SimulationSettings (encoder, velocity filter, torque gain)
+    seed : seed of the noise's generator
+    metadata : entries added to the dataset's metadata
+
+    Returns
+    -------
+    (Dataset, GroundTruth)
+        The measured log (t, encoder angles, logged torques) and the truth (states, applied torque, noise).
     """
     settings = settings or SimulationSettings()
     noise = noise or TorqueNoise(0.0, "none")
@@ -203,10 +185,10 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     if substeps < 1 or abs(substeps * h - dt) > 1e-9 * dt:
         raise SimulationError(f"the reference's sample period {dt:g} s must be a multiple of the model timestep {h:g} s")
     if feedforward is None:
-        feedforward = np.zeros((n, 4))
+        feedforward = np.zeros((n, N_JOINTS))
     feedforward = np.asarray(feedforward, dtype=float)
-    if feedforward.shape != (n, 4):
-        raise SimulationError(f"feedforward must have shape ({n}, 4), got {feedforward.shape}")
+    if feedforward.shape != (n, N_JOINTS):
+        raise SimulationError(f"feedforward must have shape ({n}, {N_JOINTS}), got {feedforward.shape}")
 
     for attr in ("start", "bound", "describe"):
         if not hasattr(noise, attr):
@@ -234,7 +216,7 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
         law = _ArrayLaw(controller, vfilter, res, lo, hi, q_ref, qd_ref, feedforward)
 
     rec_qpos, rec_qvel, rec_qacc = np.empty((n, model.nq)), np.empty((n, model.nv)), np.empty((n, model.nv))
-    rec_app, efc = np.empty((n, 4)), np.zeros((n, max(ne, 1)))
+    rec_app, efc = np.empty((n, N_JOINTS)), np.zeros((n, max(ne, 1)))
     rec_cmd, rec_qm = [], []
     qm = _index(geometry.qpos_motor)
     qpos, qvel, qacc, ctrl, act, efc_pos = data.qpos, data.qvel, data.qacc, data.ctrl, data.actuator_force, data.efc_pos
@@ -258,8 +240,8 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     dm = geometry.dof_motor
     nac_dof = model.jnt_dofadr[[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in NACELLE_JOINTS]]
     logged = np.asarray(stream.measured(rec_cmd.copy()), dtype=float)
-    if logged.shape != (n, 4):
-        raise SimulationError(f"noise stream's measured() must return shape ({n}, 4), got {logged.shape}")
+    if logged.shape != (n, N_JOINTS):
+        raise SimulationError(f"noise stream's measured() must return shape ({n}, {N_JOINTS}), got {logged.shape}")
 
     meta = {
         "kind": "simulation",

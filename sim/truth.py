@@ -60,6 +60,14 @@ def nacelle_mass_matrix(model: mujoco.MjModel) -> np.ndarray:
     including the forearm rods' point masses at the attachment points A_i (they move with their lateral bar).
 
     The paper's model holds when it is diag(Mnac, Mnac, Mnac, Ibc) (checked by a test).
+
+    Parameters
+    ----------
+    model : mujoco.MjModel of the H4
+
+    Returns
+    -------
+    (4, 4) kinetic-energy matrix [kg; kg m for the couplings; kg m^2 for theta]
     """
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0
@@ -93,6 +101,14 @@ def true_parameters(model: mujoco.MjModel) -> np.ndarray:
     half of the forearm); Mnac, Ibc from the nacelle's kinetic energy (:func:`nacelle_mass_matrix`, with the
     forearm rods' point masses at A_i);
     Fv_i = joint damping; Fs_i = joint frictionloss.
+
+    Parameters
+    ----------
+    model : mujoco.MjModel of the H4
+
+    Returns
+    -------
+    (14,) true parameters in the order of TRUE_PARAMETER_ORDER (SI units)
     """
     if not isinstance(model, mujoco.MjModel):
         raise TypeError(f"model must be a mujoco.MjModel, got {type(model).__name__}")

@@ -12,14 +12,28 @@ import math
 
 import numpy as np
 
-N_JOINTS = 4
+N_JOINTS = 4  # the H4's four actuated joints: the one definition in sim (the other modules import it)
 
-__all__ = ["as_float_array", "axis_array", "check_finite", "joint_array", "joint_vector", "positive",
-           "positive_int", "real"]
+__all__ = ["N_JOINTS", "SimulationError", "as_float_array", "axis_array", "check_finite", "joint_array",
+           "joint_vector", "positive", "positive_int", "real"]
+
+
+class SimulationError(ValueError):
+    """Bad simulation input (reference, noise, settings); re-exported by :mod:`sim.simulate` and :mod:`sim`."""
 
 
 def as_float_array(x, name: str) -> np.ndarray:
-    """``x`` as a float array; TypeError for strings, None and non-numeric values."""
+    """``x`` as a float array; TypeError for strings, None and non-numeric values.
+
+    Parameters
+    ----------
+    x : the value
+    name : the argument's name, for the message
+
+    Returns
+    -------
+    float ndarray
+    """
     if isinstance(x, (str, bytes)) or x is None:
         raise TypeError(f"{name} must be an array of numbers, got {type(x).__name__}")
     try:
@@ -29,13 +43,33 @@ def as_float_array(x, name: str) -> np.ndarray:
 
 
 def check_finite(arr: np.ndarray, name: str) -> None:
-    """ValueError naming how many entries of ``arr`` are NaN or infinite."""
+    """ValueError naming how many entries of ``arr`` are NaN or infinite.
+
+    Parameters
+    ----------
+    arr : float array
+    name : the argument's name, for the message
+
+    Returns
+    -------
+    None
+    """
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(arr))} non-finite entries")
 
 
 def real(x, name: str) -> float:
-    """A finite real number (bool refused)."""
+    """A finite real number (bool refused).
+
+    Parameters
+    ----------
+    x : the value
+    name : the argument's name, for the message
+
+    Returns
+    -------
+    float
+    """
     if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a real number, got {type(x).__name__}")
     x = float(x)
@@ -45,7 +79,17 @@ def real(x, name: str) -> float:
 
 
 def positive(x, name: str) -> float:
-    """A finite real number > 0."""
+    """A finite real number > 0.
+
+    Parameters
+    ----------
+    x : the value
+    name : the argument's name, for the message
+
+    Returns
+    -------
+    float
+    """
     if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a real number, got {type(x).__name__}")
     x = float(x)
@@ -55,7 +99,18 @@ def positive(x, name: str) -> float:
 
 
 def positive_int(x, name: str, minimum: int = 1) -> int:
-    """An integer >= ``minimum`` (bool refused)."""
+    """An integer >= ``minimum`` (bool refused).
+
+    Parameters
+    ----------
+    x : the value
+    name : the argument's name, for the message
+    minimum : the smallest allowed value
+
+    Returns
+    -------
+    int
+    """
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, got {type(x).__name__}")
     if x < minimum:
@@ -64,7 +119,17 @@ def positive_int(x, name: str, minimum: int = 1) -> int:
 
 
 def joint_array(x, name: str = "q") -> np.ndarray:
-    """A finite float array of shape (n, 4): one row per sample, one column per joint."""
+    """A finite float array of shape (n, 4): one row per sample, one column per joint.
+
+    Parameters
+    ----------
+    x : the value
+    name : the argument's name, for the message
+
+    Returns
+    -------
+    (n, 4) float ndarray
+    """
     arr = as_float_array(x, name)
     if arr.ndim != 2 or arr.shape[1] != N_JOINTS:
         raise ValueError(f"{name} must have shape (n, {N_JOINTS}), got {arr.shape}")
@@ -73,7 +138,17 @@ def joint_array(x, name: str = "q") -> np.ndarray:
 
 
 def joint_vector(x, name: str) -> np.ndarray:
-    """A finite float array of shape (4,)."""
+    """A finite float array of shape (4,).
+
+    Parameters
+    ----------
+    x : the value
+    name : the argument's name, for the message
+
+    Returns
+    -------
+    (4,) float ndarray
+    """
     if isinstance(x, (str, bytes)) or x is None:
         raise TypeError(f"{name} must be an array of shape ({N_JOINTS},), got {type(x).__name__}")
     try:
@@ -88,7 +163,18 @@ def joint_vector(x, name: str) -> np.ndarray:
 
 
 def axis_array(x, name: str, *, allow_zero: bool) -> np.ndarray:
-    """A scalar (broadcast) or (4,) array, finite and > 0 (``>= 0`` with ``allow_zero``)."""
+    """A scalar (broadcast) or (4,) array, finite and > 0 (``>= 0`` with ``allow_zero``).
+
+    Parameters
+    ----------
+    x : the value
+    name : the argument's name, for the message
+    allow_zero : accept zeros
+
+    Returns
+    -------
+    (4,) float ndarray
+    """
     if isinstance(x, (str, bytes)) or x is None:
         raise TypeError(f"{name} must be a number or an array of shape ({N_JOINTS},), got {type(x).__name__}")
     try:

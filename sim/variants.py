@@ -37,7 +37,18 @@ def randomised_model(seed: int, spread: float = 0.3, path=None) -> mujoco.MjMode
     """The H4 with its identifiable physical quantities scaled by independent factors in [1 - spread, 1 + spread]:
     each motor's armature, damping and frictionloss, each arm's inertia about its axis, the central bar's mass
     and vertical inertia, the lateral bars' mass (both by one factor, keeping the nacelle's centre of mass at
-    D). Geometry is unchanged. The true parameters follow from ``sim.true_parameters`` of the result."""
+    D). Geometry is unchanged. The true parameters follow from ``sim.true_parameters`` of the result.
+
+    Parameters
+    ----------
+    seed : seed of the factors' generator
+    spread : half-width of the factors' interval, in [0, 1)
+    path : the MJCF file, or None (the default model)
+
+    Returns
+    -------
+    mujoco.MjModel
+    """
     if not 0.0 <= spread < 1.0:
         raise ValueError(f"spread must be in [0, 1), got {spread!r}")
     rng = np.random.default_rng(seed)
@@ -74,6 +85,16 @@ def broken_hypotheses_model(arm_com_offset=0.0, forearm_mass: float = 0.0, path=
     its far end that the default model's paper parameters already count. The paper's parameters then
     hold the rod's two lumped halves (m/2 at B_i: Imot += m L^2 / 2 and a first moment MXa += m L / 2; m/2 at
     A_i: Mnac += m / 2, Ibc += m |DC_i|^2 / 2) and ``mf_i = m`` carries the rest (the rod minus its halves).
+
+    Parameters
+    ----------
+    arm_com_offset : scalar or (4,) centre-of-mass offsets along the arms [m]
+    forearm_mass : mass of each forearm rod [kg], >= 0
+    path : the MJCF file, or None (the default model)
+
+    Returns
+    -------
+    (model, theta) : the mujoco.MjModel and its (22,) true extended parameters (SI)
     """
     offsets = np.broadcast_to(np.asarray(arm_com_offset, dtype=float), (4,)).copy()
     if not np.all(np.isfinite(offsets)):
@@ -126,7 +147,17 @@ def broken_hypotheses_model(arm_com_offset=0.0, forearm_mass: float = 0.0, path=
 def unbalanced_arms_model(offsets, path=None) -> tuple[mujoco.MjModel, np.ndarray]:
     """The H4 with each arm's centre of mass moved by ``offsets[i]`` [m] along the arm (from the motor axis):
     the arms are no longer balanced and gravity loads the motors. Returns (model, MXa) with MXa_i = m_i r_i
-    [kg m], the first moments of the extended regressor's arm-gravity columns."""
+    [kg m], the first moments of the extended regressor's arm-gravity columns.
+
+    Parameters
+    ----------
+    offsets : scalar or (4,) centre-of-mass offsets along the arms [m]
+    path : the MJCF file, or None (the default model)
+
+    Returns
+    -------
+    (model, MXa) : the mujoco.MjModel and the (4,) first moments [kg m]
+    """
     offsets = np.asarray(offsets, dtype=float).reshape(-1)
     if offsets.shape != (4,) or not np.all(np.isfinite(offsets)):
         raise ValueError(f"offsets must be 4 finite values [m], got {offsets!r}")

@@ -24,7 +24,9 @@ Hamming design, about 1.06 for 4*factor+1 taps, exactly 1 for non-negative taps)
 :func:`parallel_filter` also bounds the floating-point error of computing ``h * y`` and ``h * W`` (Higham's
 ``gamma_n |h| * |y|``), so its returned bound is rigorous for the computed ``W_f``, ``y_f``.
 
-Stacking convention: sample ``k``, joint ``i`` -> row ``4*k + i`` of ``W`` and ``y``.
+Any number of joints ``nj`` (the H4 has 4, a serial arm 6): every function works column by column (joint by
+joint), so the result for one joint does not depend on the others. Stacking convention: sample ``k``, joint
+``i`` -> row ``nj*k + i`` of ``W`` and ``y`` (``4*k + i`` for the H4).
 """
 
 from __future__ import annotations
@@ -36,9 +38,12 @@ from typing import NamedTuple
 import numpy as np
 import scipy.signal
 
-from ident.validation import as_float_array, check_finite, joint_array, positive, positive_int
+from ident.validation import as_float_array, check_finite, positive, positive_int
+
+N_JOINTS = 4  # the default chain's joint count (the H4's); every function takes `joints` for other robots
 
 __all__ = [
+    "DEFAULT_TORQUE_TIMING",
     "TORQUE_TIMINGS",
     "Derivatives",
     "FilteredEquation",
@@ -54,12 +59,20 @@ __all__ = [
     "torque_timing",
 ]
 
-N_JOINTS = 4
 _U = 2.0**-53  # unit round-off of binary64, round to nearest
 _TINY = 1e-300  # absolute slack for underflow: >= L * 2**-1074 for any realistic tap count L
 
 
 # ----------------------------------------------------------------------------------------------- validation
+
+
+def _joint_columns(x, name: str = "q") -> np.ndarray:
+    """A finite float array of shape (n, nj), nj >= 1: one row per sample, one column per joint."""
+    arr = as_float_array(x, name)
+    if arr.ndim != 2 or arr.shape[1] < 1:
+        raise ValueError(f"{name} must have shape (n, n_joints), one column per joint, got {arr.shape}")
+    check_finite(arr, name)
+    return arr
 
 
 def _cutoff(cutoff_hz, dt: float, name: str = "cutoff_hz") -> float:
@@ -88,7 +101,7 @@ def default_edge_samples(dt: float, cutoff_hz: float) -> int:
 def lowpass_position(q, dt: float, cutoff_hz: float, order: int = 4, padlen: int | None = None) -> np.ndarray:
     """Zero-phase Butterworth low-pass of each joint's position (``scipy.signal.sosfiltfilt``).
 
-    q : (n, 4) joint angles [rad]; dt : sample period [s]; cutoff_hz : -3 dB frequency of ONE pass [Hz]
+    q : (n, nj) joint angles [rad]; dt : sample period [s]; cutoff_hz : -3 dB frequency of ONE pass [Hz]
     (forward-backward squares the magnitude: the combined gain at ``cutoff_hz`` is 1/2, -6 dB, and the
     effective order is ``2*order``); order : Butterworth order of one pass.
 
@@ -97,9 +110,9 @@ def lowpass_position(q, dt: float, cutoff_hz: float, order: int = 4, padlen: int
     :func:`default_edge_samples` (about three time constants of the filter), clipped to ``n - 1``. Samples
     within that distance of either end still carry some transient; :func:`derivatives` marks them invalid.
 
-    Returns (n, 4) filtered positions [rad].
+    Returns (n, nj) filtered positions [rad].
     """
-    q = joint_array(q)
+    q = _joint_columns(q)
     dt = positive(dt, "dt")
     cutoff_hz = _cutoff(cutoff_hz, dt)
     order = positive_int(order, "order")
@@ -153,7 +166,7 @@ def second_difference(x, dt: float) -> np.ndarray:
 class Derivatives(NamedTuple):
     """Filtered joint positions and their derivatives; ``valid`` selects samples free of edge effects.
 
-    q : (n, 4) [rad]; qd : (n, 4) [rad/s]; qdd : (n, 4) [rad/s^2]; valid : slice over axis 0.
+    q : (n, nj) [rad]; qd : (n, nj) [rad/s]; qdd : (n, nj) [rad/s^2]; valid : slice over axis 0.
     Typical use: ``q, qd, qdd, valid = derivatives(...)`` then ``q[valid]``, ``qd[valid]``, ...
     """
 
@@ -164,14 +177,16 @@ class Derivatives(NamedTuple):
 
 
 def derivatives(q, dt: float, cutoff_hz: float, order: int = 4, trim: int | None = None,
-                timing: str = "sample") -> Derivatives:
+                timing: str = "hold") -> Derivatives:
     """Zero-phase low-pass of ``q`` then ``qd``, ``qdd`` by central differences of the filtered positions.
 
-    q : (n, 4) measured joint angles [rad]; dt : sample period [s]; cutoff_hz, order : Butterworth settings of
+    q : (n, nj) measured joint angles [rad]; dt : sample period [s]; cutoff_hz, order : Butterworth settings of
     :func:`lowpass_position`; trim : samples to mark invalid at each end, default
     ``default_edge_samples(dt, cutoff_hz) + 2`` (filter transient + the one-sided difference stencils).
 
-    timing : the instant the torque sample ``k`` stands for (:data:`TORQUE_TIMINGS`):
+    timing : the instant the torque sample ``k`` stands for (:data:`TORQUE_TIMINGS`); default
+    :data:`DEFAULT_TORQUE_TIMING` = ``"hold"``, the one default of the library, the scenario specs and
+    ``h4bench identify`` (the simulator's torques, like a joint controller's logged commands, are held):
 
     - ``"sample"``: the instant ``t_k`` (a torque measured at the sampling instant; the paper's convention):
       ``q[k]``, ``(q[k+1] - q[k-1]) / (2 dt)``, ``(q[k+1] - 2 q[k] + q[k-1]) / dt^2``;
@@ -185,7 +200,7 @@ def derivatives(q, dt: float, cutoff_hz: float, order: int = 4, trim: int | None
     All arrays keep length n (end samples use one-sided second-order differences) and ``valid =
     slice(trim, n - trim)`` says which samples to keep. Raises ValueError if nothing would remain.
     """
-    q = joint_array(q)
+    q = _joint_columns(q)
     dt = positive(dt, "dt")
     cutoff_hz = _cutoff(cutoff_hz, dt)
     n = q.shape[0]
@@ -210,6 +225,10 @@ def derivatives(q, dt: float, cutoff_hz: float, order: int = 4, trim: int | None
 
 
 TORQUE_TIMINGS = ("sample", "hold")
+#: The one default torque timing (:func:`derivatives`, :class:`ProcessingSettings`, :func:`ident.robots.serial.process`,
+#: the scenario specs): a logged torque is a command held over its sample period. Pass ``"sample"`` for torques
+#: measured at the sampling instants.
+DEFAULT_TORQUE_TIMING = "hold"
 
 
 def torque_timing(timing) -> str:
@@ -250,16 +269,16 @@ def decimation_fir(factor: int, numtaps: int | None = None, cutoff: float = 0.8,
 class FilteredEquation:
     """Result of :func:`parallel_filter`: ``y = W theta + e`` with ``|e| <= bound`` row by row.
 
-    W : (4m, p) filtered, decimated regressor; y : (4m,) filtered torques [N m];
-    bound : (4m,) rigorous bound [N m] on ``|y - W theta_true|`` given the input bound; it includes the
+    W : (nj m, p) filtered, decimated regressor; y : (nj m,) filtered torques [N m];
+    bound : (nj m,) rigorous bound [N m] on ``|y - W theta_true|`` given the input bound; it includes the
     rounding error of computing ``W`` only if ``w_rounding_included`` (``theta_abs_max`` was given), else add
     ``w_rounding @ theta_abs_max`` yourself (:meth:`total_bound` does it rigorously);
-    w_rounding : (4m, p) elementwise bound on ``|W - h * W_exact|`` (floating-point error of the filter);
+    w_rounding : (nj m, p) elementwise bound on ``|W - h * W_exact|`` (floating-point error of the filter);
     sample_index : (m,) index of the original sample at the centre of each output's window (tap
-    ``(L-1)//2``: for symmetric taps the time the output represents); output row ``4*k + i`` is joint i of
+    ``(L-1)//2``: for symmetric taps the time the output represents); output row ``nj*k + i`` is joint i of
     ``sample_index[k]``; window_start : (m,) first original sample in each window (the window is
     ``window_start[k] .. window_start[k] + L - 1``); taps : (L,) the filter h; factor : decimation factor;
-    l1_norm : ``||h||_1`` (the scalar-bound amplification).
+    l1_norm : ``||h||_1`` (the scalar-bound amplification); joints : nj, the joints per sample.
     """
 
     W: np.ndarray
@@ -272,14 +291,15 @@ class FilteredEquation:
     taps: np.ndarray
     factor: int
     l1_norm: float
+    joints: int = N_JOINTS
 
     @property
     def rows(self) -> np.ndarray:
-        """(m, 4) original row indices ``4*sample_index[k] + i`` that each output row stands for."""
-        return N_JOINTS * self.sample_index[:, None] + np.arange(N_JOINTS)
+        """(m, nj) original row indices ``nj*sample_index[k] + i`` that each output row stands for."""
+        return self.joints * self.sample_index[:, None] + np.arange(self.joints)
 
     def total_bound(self, theta_abs_max) -> np.ndarray:
-        """(4m,) rigorous bound ``bound + w_rounding @ theta_abs_max``, rounded up.
+        """(nj m,) rigorous bound ``bound + w_rounding @ theta_abs_max``, rounded up.
 
         theta_abs_max : (p,) max ``|theta_j|`` over the prior box. If the W rounding is already included,
         returns ``bound`` unchanged.
@@ -290,23 +310,24 @@ class FilteredEquation:
         return _round_up(self.bound + self.w_rounding @ t, self.W.shape[1] + 2)
 
     def propagate_mask(self, row_mask) -> np.ndarray:
-        """(4m,) bool: output row kept iff every input row of the same joint in its window is kept.
+        """(nj m,) bool: output row kept iff every input row of the same joint in its window is kept.
 
-        row_mask : (4n,) bool over the ORIGINAL rows (e.g. from :func:`exclude_low_speed`), True = keep.
+        row_mask : (nj n,) bool over the ORIGINAL rows (e.g. from :func:`exclude_low_speed`), True = keep.
         Use this to exclude rows after filtering without breaking the time contiguity the filter needs.
         (Alternatively, keep all rows and enlarge their bound where the model is unreliable, e.g.
         ``b + 2 Fs_max`` where ``sign(qd)`` is uncertain; that propagates exactly.)
         """
         row_mask = np.asarray(row_mask)
-        if row_mask.dtype != bool or row_mask.ndim != 1 or row_mask.size % N_JOINTS:
-            raise ValueError(f"row_mask must be a 1-D bool array of length 4n, got dtype {row_mask.dtype}, "
+        nj = self.joints
+        if row_mask.dtype != bool or row_mask.ndim != 1 or row_mask.size % nj:
+            raise ValueError(f"row_mask must be a 1-D bool array of length {nj}n, got dtype {row_mask.dtype}, "
                              f"shape {row_mask.shape}")
-        n = row_mask.size // N_JOINTS
+        n = row_mask.size // nj
         L = self.taps.size
         if self.window_start.size and self.window_start[-1] + L > n:
             raise ValueError(f"row_mask covers {n} samples, fewer than the filtered data used "
                              f"({self.window_start[-1] + L})")
-        bad = np.concatenate([np.zeros((1, N_JOINTS)), np.cumsum(~row_mask.reshape(n, N_JOINTS), axis=0)])
+        bad = np.concatenate([np.zeros((1, nj)), np.cumsum(~row_mask.reshape(n, nj), axis=0)])
         counts = bad[self.window_start + L] - bad[self.window_start]
         return (counts == 0).reshape(-1)
 
@@ -355,13 +376,14 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
                     taps=None, theta_abs_max=None, joints: int = N_JOINTS) -> FilteredEquation:
     """Parallel filtering of ``y = W theta + e``: the same FIR per joint on ``y`` and every column of ``W``.
 
-    W : (4n, p) regressor, rows stacked ``4*k + i`` (sample k, joint i); y : (4n,) measured torques [N m];
-    bound : scalar or (4n,) bound on ``|e|`` [N m]; factor : integer decimation factor;
+    W : (nj n, p) regressor, rows stacked ``nj*k + i`` (sample k, joint i); y : (nj n,) measured torques [N m];
+    bound : scalar or (nj n,) bound on ``|e|`` [N m]; factor : integer decimation factor;
     numtaps, cutoff : FIR design (:func:`decimation_fir`), ignored if ``taps`` (any (L,) finite array) is given;
     theta_abs_max : optional (p,) max ``|theta_j|`` over the prior box, to fold the rounding error of ``h * W``
-    (which enters the equation as ``|dW| |theta|``) into the returned bound; joints : must be 4.
+    (which enters the equation as ``|dW| |theta|``) into the returned bound; joints : nj >= 1, the joints per
+    sample (default 4, the H4).
 
-    The FIR runs along time for each joint separately (rows i, i+4, i+8, ...), never across the interleaved
+    The FIR runs along time for each joint separately (rows i, i+nj, i+2nj, ...), never across the interleaved
     stacking, in 'valid' mode: output k uses samples ``window_start[k] .. window_start[k] + L - 1`` only, with
     ``window_start[k] = k * factor``, so no padding enters and the bound is exact:
 
@@ -373,16 +395,15 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
     ``|fl(h * W) - h * W|``. All sums of non-negative terms are rounded up (:func:`_round_up`).
     Returns a :class:`FilteredEquation` with m = ``(n - L) // factor + 1`` output samples.
     """
-    if joints != N_JOINTS:
-        raise ValueError(f"joints must be {N_JOINTS} (the H4 stacking), got {joints}")
+    nj = positive_int(joints, "joints")
     factor = positive_int(factor, "factor")
     W = as_float_array(W, "W")
     y = as_float_array(y, "y")
     if W.ndim != 2:
-        raise ValueError(f"W must have shape (4n, p), got {W.shape}")
+        raise ValueError(f"W must have shape ({nj}n, p), got {W.shape}")
     rows, p = W.shape
-    if rows == 0 or rows % N_JOINTS:
-        raise ValueError(f"W must have 4n rows (4 joints per sample), got {rows}")
+    if rows == 0 or rows % nj:
+        raise ValueError(f"W must have {nj}n rows ({nj} joints per sample), got {rows}")
     if y.shape != (rows,):
         raise ValueError(f"y must have shape ({rows},) to match W, got {y.shape}")
     check_finite(W, "W")
@@ -404,7 +425,7 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
         check_finite(h, "taps")
     t_max = None if theta_abs_max is None else _theta_abs_max(theta_abs_max, p)
 
-    n = rows // N_JOINTS
+    n = rows // nj
     L = h.size
     if n < L:
         raise ValueError(f"W and y must hold at least as many samples as taps ({L}), got {n} samples")
@@ -412,11 +433,11 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
     starts = np.arange(m) * factor
     habs = np.abs(h)
 
-    Y = y.reshape(n, N_JOINTS)
-    W3 = W.reshape(n, N_JOINTS, p)
+    Y = y.reshape(n, nj)
+    W3 = W.reshape(n, nj, p)
     y_f = _fir_valid_decimated(Y, h, starts, factor).reshape(-1)
     W_f = _fir_valid_decimated(W3, h, starts, factor).reshape(-1, p)
-    hb = _fir_valid_decimated(b.reshape(n, N_JOINTS), habs, starts, factor).reshape(-1)
+    hb = _fir_valid_decimated(b.reshape(n, nj), habs, starts, factor).reshape(-1)
     hy = _fir_valid_decimated(np.abs(Y), habs, starts, factor).reshape(-1)
     hw = _fir_valid_decimated(np.abs(W3), habs, starts, factor).reshape(-1, p)
 
@@ -429,7 +450,7 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
     l1 = float(np.nextafter(habs.sum() * (1.0 + 2.0 * _gamma(L)), np.inf))
     return FilteredEquation(W=W_f, y=y_f, bound=bound_f, w_rounding=w_rounding,
                             w_rounding_included=t_max is not None, sample_index=starts + (L - 1) // 2,
-                            window_start=starts, taps=h, factor=factor, l1_norm=l1)
+                            window_start=starts, taps=h, factor=factor, l1_norm=l1, joints=nj)
 
 
 # ----------------------------------------------------------------------------------------- low-speed rows
@@ -438,22 +459,23 @@ def parallel_filter(W, y, bound, factor: int, numtaps: int | None = None, *, cut
 def exclude_low_speed(qd, threshold, whole_samples: bool = False) -> np.ndarray:
     """Row mask (True = keep) dropping rows whose joint speed is below ``threshold``.
 
-    qd : (n, 4) joint velocities [rad/s]; threshold : scalar or (4,) per joint [rad/s], >= 0; a row
-    ``4*k + i`` is kept iff ``|qd[k, i]| >= threshold[i]``. whole_samples : if True, drop all 4 rows of a
+    qd : (n, nj) joint velocities [rad/s]; threshold : scalar or (nj,) per joint [rad/s], >= 0; a row
+    ``nj*k + i`` is kept iff ``|qd[k, i]| >= threshold[i]``. whole_samples : if True, drop all nj rows of a
     sample as soon as one joint is slow (keeps samples complete, e.g. for per-sample diagnostics).
-    Returns a (4n,) bool array aligned with the ``4*k + i`` stacking.
+    Returns a (nj n,) bool array aligned with the ``nj*k + i`` stacking.
     """
-    qd = joint_array(qd, "qd")
+    qd = _joint_columns(qd, "qd")
+    nj = qd.shape[1]
     thr = as_float_array(threshold, "threshold")
     if thr.ndim == 0:
-        thr = np.full(N_JOINTS, float(thr))
-    elif thr.shape != (N_JOINTS,):
-        raise ValueError(f"threshold must be a scalar or have shape ({N_JOINTS},), got {thr.shape}")
+        thr = np.full(nj, float(thr))
+    elif thr.shape != (nj,):
+        raise ValueError(f"threshold must be a scalar or have shape ({nj},), got {thr.shape}")
     if not np.all(np.isfinite(thr)) or np.any(thr < 0):
         raise ValueError(f"threshold must be finite and >= 0, got {thr}")
     keep = np.abs(qd) >= thr
     if whole_samples:
-        keep = np.repeat(keep.all(axis=1, keepdims=True), N_JOINTS, axis=1)
+        keep = np.repeat(keep.all(axis=1, keepdims=True), nj, axis=1)
     return keep.reshape(-1)
 
 
@@ -477,8 +499,9 @@ class ProcessingSettings:
     rejection (aliasing does not bias the filtered equation, it only mixes high-frequency content in).
     speed_threshold = 0.05 rad/s: MuJoCo's friction law is exact above ~0.005 rad/s, and a sign change
     within one step needs ``|qd| < |qdd| dt`` (~0.05 rad/s at 50 rad/s^2); rows below are excluded.
-    torque_timing = "sample": the torque sample ``k`` stands for the instant ``t_k``; ``"hold"`` for a
-    zero-order-hold command held over ``[t_k, t_k + dt)`` (the regressor at mid-step, see :func:`derivatives`).
+    torque_timing = "hold" (:data:`DEFAULT_TORQUE_TIMING`, the specs' default too): the torque sample ``k`` is
+    a zero-order-hold command held over ``[t_k, t_k + dt)`` (the regressor at mid-step, see :func:`derivatives`),
+    as the simulator's torques; ``"sample"``: it stands for the instant ``t_k`` (a torque measured there).
     """
 
     dt: float = 1e-3
@@ -488,7 +511,7 @@ class ProcessingSettings:
     fir_cutoff: float = 0.8
     numtaps: int | None = None
     speed_threshold: float = 0.05
-    torque_timing: str = "sample"
+    torque_timing: str = DEFAULT_TORQUE_TIMING
 
     def __post_init__(self) -> None:
         dt = positive(self.dt, "dt")

@@ -423,18 +423,6 @@ def rich_friction_columns(qd, v_s: float) -> tuple[np.ndarray, tuple[str, ...]]:
     return cols, names
 
 
-def _by_fours(fn, X: np.ndarray) -> list[np.ndarray]:
-    """Apply ``fn`` (written for 4 joint columns, :mod:`ident.processing.filtering`) to groups of 4 columns of X (n, nj),
-    the last group padded by repeating its columns; returns fn's outputs per group with the pad removed."""
-    nj = X.shape[1]
-    outs = []
-    for g in range(0, nj, 4):
-        cols = list(range(g, min(g + 4, nj)))
-        pad = (cols * 4)[:4]
-        outs.append((fn(X[:, pad]), len(cols)))
-    return outs
-
-
 @dataclass(frozen=True)
 class SerialEquation:
     """Processed equation ``y = W theta + e`` of an n-joint log, ``|e_r| <= gain * b_joint(r) + rounding_r``.
@@ -478,7 +466,7 @@ class SerialEquation:
 def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cutoff_hz: float, decimation: int,
             numtaps: int | None = None, fir_cutoff: float = 0.8, speed_threshold: float = 0.05,
             theta_abs_max=None, butter_order: int = 4, first_sample: int = 0, rich_friction: float | None = None,
-            keep_raw: bool = False) -> SerialEquation:
+            keep_raw: bool = False, torque_timing: str = "hold") -> SerialEquation:
     """The paper's processing chain (:mod:`ident.processing.processing`) for an n-joint serial robot.
 
     q : (n, nj) measured joint angles [rad]; tau : (n, nj) joint torques [N m]; dt [s]; cutoff_hz : zero-phase
@@ -492,9 +480,12 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
     ``v_s`` [rad/s]: append per joint the columns of a richer friction law (:func:`rich_friction_columns`), to
     measure how much of the residual the standard law leaves (they are not standard parameters); their
     entries of ``theta_abs_max`` must then be given too. keep_raw : keep the unfiltered equation in
-    ``info['raw']`` (``W`` (n', nj, r), ``y`` (n', nj), ``sample`` (n',)) for residual spectra.
-    :mod:`ident.processing.filtering` is written for 4
-    joints: it is applied here to groups of 4 joints (the last padded by repetition), joint by joint as it is.
+    ``info['raw']`` (``W`` (n', nj, r), ``y`` (n', nj), ``sample`` (n',)) for residual spectra. torque_timing :
+    ``"hold"`` (the library's default, :data:`ident.processing.filtering.DEFAULT_TORQUE_TIMING`: each torque a
+    command held over its step, the regressor at mid-step) or ``"sample"`` (torques measured at the sampling
+    instants, the regressor there), see :func:`ident.processing.filtering.derivatives`.
+    The chain's functions work on any number of joints (column by column), so all nj joints go through one
+    call of each.
     """
     from ident.processing.filtering import (
         decimation_fir,
@@ -508,11 +499,9 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
     tau = _states(tau, "tau", nj)
     if q.shape != tau.shape:
         raise ValueError(f"q and tau must have the same shape, got {q.shape}, {tau.shape}")
-    est = [(d, k) for d, k in _by_fours(lambda x: derivatives(x, dt, cutoff_hz, butter_order), q)]
-    valid = est[0][0].valid
-    qf = np.concatenate([d.q[:, :k] for d, k in est], axis=1)[valid]
-    qd = np.concatenate([d.qd[:, :k] for d, k in est], axis=1)[valid]
-    qdd = np.concatenate([d.qdd[:, :k] for d, k in est], axis=1)[valid]
+    est = derivatives(q, dt, cutoff_hz, butter_order, timing=torque_timing)
+    valid = est.valid
+    qf, qd, qdd = est.q[valid], est.qd[valid], est.qdd[valid]
     samples = np.arange(q.shape[0])[valid] + int(first_sample)
     n = qf.shape[0]
     W = robot.regressor(qf, qd, qdd, columns=base.independent).reshape(n, nj, len(base))
@@ -531,20 +520,9 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
     taps = decimation_fir(decimation, numtaps, fir_cutoff)
     L = taps.size
     t_abs = None if theta_abs_max is None else np.asarray(theta_abs_max, dtype=float)
-    parts = []
-    for g in range(0, nj, 4):
-        cols = list(range(g, min(g + 4, nj)))
-        pad = (cols * 4)[:4]
-        fe = parallel_filter(W[:, pad, :].reshape(4 * n, -1), y[:, pad].reshape(-1), 0.0, decimation, taps=taps,
-                             theta_abs_max=t_abs)
-        k = len(cols)
-        m = fe.sample_index.size
-        parts.append((fe.W.reshape(m, 4, -1)[:, :k], fe.y.reshape(m, 4)[:, :k], fe.bound.reshape(m, 4)[:, :k]))
-        gain = fe.l1_norm
-        start = fe.window_start
-    Wf = np.concatenate([p[0] for p in parts], axis=1)
-    yf = np.concatenate([p[1] for p in parts], axis=1)
-    rf = np.concatenate([p[2] for p in parts], axis=1)
+    fe = parallel_filter(W.reshape(nj * n, -1), y.reshape(-1), 0.0, decimation, taps=taps, theta_abs_max=t_abs,
+                         joints=nj)
+    gain, start = fe.l1_norm, fe.window_start
     m = start.size
     bad = np.concatenate([np.zeros((1, nj)), np.cumsum(slow, axis=0)])
     keep = (bad[start + L] - bad[start]) == 0  # (m, nj)
@@ -558,9 +536,8 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
             "rounding_includes_W": t_abs is not None}
     if keep_raw:
         info["raw"] = {"W": W, "y": y, "sample": samples}
-    return SerialEquation(W=Wf.reshape(m * nj, -1)[rows], y=yf.reshape(-1)[rows], gain=float(gain),
-                          rounding=rf.reshape(-1)[rows], sample=centre[k_idx], joint=j_idx, names=names,
-                          window=window[k_idx], info=info)
+    return SerialEquation(W=fe.W[rows], y=fe.y[rows], gain=float(gain), rounding=fe.bound[rows],
+                          sample=centre[k_idx], joint=j_idx, names=names, window=window[k_idx], info=info)
 
 
 # ------------------------------------------------------------------------------------- prediction envelope

@@ -138,7 +138,8 @@ def run_tx40(cfg: dict, seed: int, progress=None) -> tuple[dict, dict]:
     n1 = round(cfg["identify_fraction"] * n)
     kw = {"cutoff_hz": cfg["cutoff_hz"], "decimation": int(cfg["decimation"]), "numtaps": int(cfg["numtaps"]) or None,
           "fir_cutoff": cfg["fir_cutoff"], "speed_threshold": cfg["speed_threshold"], "theta_abs_max": t_abs,
-          "butter_order": int(cfg["butter_order"]), "rich_friction": cfg["stribeck_velocity"]}
+          "butter_order": int(cfg["butter_order"]), "rich_friction": cfg["stribeck_velocity"],
+          "torque_timing": "sample"}  # the regressor at the sampling instants (the log's processing, unchanged)
     eq_rich = process(robot, base, q[:n1], tau[:n1], log.dt, keep_raw=True, **kw)
     eq_ho_rich = process(robot, base, q[n1:], tau[n1:], log.dt, first_sample=n1, **kw)
     raw = eq_rich.info.pop("raw")

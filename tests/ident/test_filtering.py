@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ident.processing.filtering import (
+    DEFAULT_TORQUE_TIMING,
     Derivatives,
     FilteredEquation,
     ProcessingSettings,
@@ -117,7 +118,7 @@ def test_lowpass_leaves_slow_motion_and_removes_fast_noise():
 
 def test_lowpass_bad_inputs():
     q = np.zeros((100, 4))
-    with pytest.raises(ValueError, match=r"q must have shape \(n, 4\), got \(3,\)"):
+    with pytest.raises(ValueError, match=r"q must have shape \(n, n_joints\), one column per joint, got \(3,\)"):
         lowpass_position(np.zeros(3), DT, 20.0)
     with pytest.raises(ValueError, match="Nyquist"):
         lowpass_position(q, DT, 600.0)
@@ -133,7 +134,7 @@ def test_lowpass_bad_inputs():
 
 def test_derivatives_valid_region_matches_analytic():
     q, qd, qdd, a, w = _sines(5000, DT)
-    res = derivatives(q, DT, 50.0)
+    res = derivatives(q, DT, 50.0, timing="sample")  # the states at the sample instants
     assert isinstance(res, Derivatives)
     qf, qdf, qddf, valid = res
     assert valid == slice(default_edge_samples(DT, 50.0) + 2, 5000 - default_edge_samples(DT, 50.0) - 2)
@@ -156,8 +157,10 @@ def test_hold_timing_gives_the_mid_step_states():
     ph = np.arange(4)[None, :]
     q_mid, qd_mid, qdd_mid = (a * np.sin(w * t_mid + ph), a * w * np.cos(w * t_mid + ph),
                               -a * w**2 * np.sin(w * t_mid + ph))
-    held = derivatives(q, DT, 50.0, timing="hold")
-    at = derivatives(q, DT, 50.0)
+    held = derivatives(q, DT, 50.0)  # "hold" is the default
+    at = derivatives(q, DT, 50.0, timing="sample")
+    assert DEFAULT_TORQUE_TIMING == "hold" and ProcessingSettings().torque_timing == DEFAULT_TORQUE_TIMING
+    np.testing.assert_array_equal(held.qd, derivatives(q, DT, 50.0, timing="hold").qd)
     v = held.valid
     assert v == at.valid
     edge = (2e-7, 5e-4, 2e-2)  # what is left of the Butterworth edge transient (as in the test above)
@@ -332,8 +335,10 @@ def test_parallel_filter_bad_inputs():
         parallel_filter(W, y, 1.0, 2, numtaps=5, theta_abs_max=np.ones(2))
     with pytest.raises(ValueError, match="cutoff must be in"):
         parallel_filter(W, y, 1.0, 2, numtaps=5, cutoff=1.5)
-    with pytest.raises(ValueError, match="joints must be 4"):
+    with pytest.raises(ValueError, match=r"W must have 3n rows \(3 joints per sample\), got 400"):
         parallel_filter(W, y, 1.0, 2, numtaps=5, joints=3)
+    with pytest.raises(ValueError, match="joints must be an integer >= 1"):
+        parallel_filter(W, y, 1.0, 2, numtaps=5, joints=0)
     with pytest.raises(ValueError, match="taps must be a non-empty 1-D array"):
         parallel_filter(W, y, 1.0, 2, taps=np.ones((2, 2)))
 
@@ -351,7 +356,7 @@ def test_exclude_low_speed_rows_and_samples():
     np.testing.assert_array_equal(keep, [True] * 4 + [True] * 4)
     keep = exclude_low_speed(qd, 0.05, whole_samples=True)
     np.testing.assert_array_equal(keep, [False] * 8)
-    with pytest.raises(ValueError, match=r"qd must have shape \(n, 4\), got \(4,\)"):
+    with pytest.raises(ValueError, match=r"qd must have shape \(n, n_joints\), one column per joint, got \(4,\)"):
         exclude_low_speed(np.zeros(4), 0.1)
     with pytest.raises(ValueError, match="threshold must be finite and >= 0"):
         exclude_low_speed(qd, -0.1)
@@ -384,3 +389,50 @@ def test_filtered_equation_is_a_frozen_dataclass():
     assert isinstance(fe, FilteredEquation)
     with pytest.raises(AttributeError):
         fe.factor = 2
+
+
+# ------------------------------------------------------------------------------------------------ n joints
+
+
+def test_chain_for_n_joints_is_joint_by_joint():
+    """Any number of joints: each joint's derivatives, filtered rows and bounds are those of that joint alone
+    (bit for bit), and the filtered rows equal numpy.convolve of the joint's column (an independent oracle)."""
+    rng = np.random.default_rng(3)
+    n, nj, p = 600, 6, 3
+    t = np.arange(n)[:, None] * DT
+    q = np.sin(2 * np.pi * (1.0 + np.arange(nj)) * t) + 0.01 * rng.standard_normal((n, nj))
+    for timing in ("sample", "hold"):
+        all_j = derivatives(q, DT, 50.0, timing=timing)
+        for j in range(nj):
+            one = derivatives(q[:, [j]], DT, 50.0, timing=timing)
+            assert one.valid == all_j.valid
+            for a, b in ((all_j.q, one.q), (all_j.qd, one.qd), (all_j.qdd, one.qdd)):
+                np.testing.assert_array_equal(a[:, j], b[:, 0])
+    W3 = rng.standard_normal((n, nj, p))
+    Y = rng.standard_normal((n, nj))
+    B = rng.uniform(0.5, 1.5, (n, nj))
+    taps = decimation_fir(5, 21)
+    fe = parallel_filter(W3.reshape(-1, p), Y.reshape(-1), B.reshape(-1), 5, taps=taps, theta_abs_max=np.ones(p),
+                         joints=nj)
+    assert fe.joints == nj and fe.rows.shape == (fe.sample_index.size, nj)
+    m = fe.sample_index.size
+    for j in range(nj):
+        one = parallel_filter(W3[:, j], Y[:, j], B[:, j], 5, taps=taps, theta_abs_max=np.ones(p), joints=1)
+        np.testing.assert_array_equal(fe.W.reshape(m, nj, p)[:, j], one.W)
+        np.testing.assert_array_equal(fe.y.reshape(m, nj)[:, j], one.y)
+        np.testing.assert_array_equal(fe.bound.reshape(m, nj)[:, j], one.bound)
+        oracle = np.convolve(Y[:, j], taps, mode="valid")[::5]
+        np.testing.assert_allclose(fe.y.reshape(m, nj)[:, j], oracle, rtol=0, atol=1e-12)
+        # the bound covers the propagated raw bound |h| * b
+        assert np.all(fe.bound.reshape(m, nj)[:, j] >= np.convolve(B[:, j], np.abs(taps), mode="valid")[::5])
+    # a slow row masks exactly the outputs of its joint whose window holds it
+    keep = np.ones((n, nj), dtype=bool)
+    keep[100, 4] = False
+    mask = fe.propagate_mask(keep.reshape(-1)).reshape(m, nj)
+    inside = (fe.window_start <= 100) & (100 < fe.window_start + taps.size)
+    np.testing.assert_array_equal(mask[:, 4], ~inside)
+    assert mask[:, [0, 1, 2, 3, 5]].all()
+    rows = exclude_low_speed(np.array([[0.1, 0.0, 0.2, 0.3, 0.0, 0.5]]), np.full(6, 0.05))
+    np.testing.assert_array_equal(rows, [True, False, True, True, False, True])
+    with pytest.raises(ValueError, match=r"threshold must be a scalar or have shape \(6,\)"):
+        exclude_low_speed(np.ones((2, 6)), np.ones(4))

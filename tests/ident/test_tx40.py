@@ -78,16 +78,13 @@ def test_least_squares_fit_agrees_with_figaroh():
     same columns, so the least-squares torque fits agree, and so do the parameters both parametrise alike."""
     pytest.importorskip("figaroh")
     from ident.processing.filtering import derivatives
-    from ident.robots.serial import _by_fours
 
     robot = tx40.robot()
     base = robot.base()
     log = tx40.load_log()
-    est = _by_fours(lambda x: derivatives(x, log.dt, 100.0), log.q)
-    v = est[0][0].valid
-    q = np.concatenate([d.q[:, :k] for d, k in est], axis=1)[v][::20]
-    qd = np.concatenate([d.qd[:, :k] for d, k in est], axis=1)[v][::20]
-    qdd = np.concatenate([d.qdd[:, :k] for d, k in est], axis=1)[v][::20]
+    est = derivatives(log.q, log.dt, 100.0)  # all six joints at once
+    v = est.valid
+    q, qd, qdd = est.q[v][::20], est.qd[v][::20], est.qdd[v][::20]
     tau = log.tau[v][::20]
     Wf = _figaroh_regressor(q, qd, qdd, robot.model)
     y_f = tau.T.reshape(-1)  # joint-major

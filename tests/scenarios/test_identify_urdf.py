@@ -113,7 +113,7 @@ def oracle(log_csv):
     eq = process(robot, base, q, tau, dt, cutoff_hz=p["cutoff_hz"], decimation=p["decimation"],
                  numtaps=p["numtaps_per_decimation"] * p["decimation"] + 1, fir_cutoff=p["fir_cutoff"],
                  speed_threshold=p["speed_threshold"], butter_order=p["butter_order"],
-                 theta_abs_max=np.maximum(np.abs(blo), np.abs(bhi)))
+                 torque_timing=p["torque_timing"], theta_abs_max=np.maximum(np.abs(blo), np.abs(bhi)))
     prior = ident.Box(blo, bhi)
     return eq, prior, base, ident.min_consistent_bound(eq.W, eq.y, prior)
 

@@ -1,4 +1,5 @@
-"""Tests of sim.controller: the design against independent computations, the discrete law in closed loop.
+"""Tests of sim.control_design and sim.controller: the design against independent computations, the discrete
+law in closed loop.
 
 Oracles: closed-loop poles from numpy.roots of the characteristic polynomial written out by hand; the -3 dB
 bandwidth and phase margin from |T(jw)|, L(jw) evaluated with numpy on a dense grid; the plant discretised
@@ -16,13 +17,8 @@ import pytest
 import scipy.linalg
 import scipy.signal
 
-from sim.controller import (
-    ControllerDesign,
-    JointController,
-    LoopReport,
-    VelocityFilter,
-    design_joint_controller,
-)
+from sim.control_design import ControllerDesign, LoopReport, design_joint_controller
+from sim.controller import JointController, VelocityFilter
 
 DT = 1e-3
 J = np.array([0.02, 0.03, 0.04, 0.05])

@@ -1,0 +1,55 @@
+"""Importing sim costs only what is used: a fresh interpreter per case, its sys.modules read after the import."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("mujoco", "control", "matplotlib")
+
+
+def _loaded(statement: str) -> set[str]:
+    code = f"import json, sys\n{statement}\nprint(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    return set(json.loads(out.splitlines()[-1]))
+
+
+@pytest.mark.parametrize(("statement", "absent"), [
+    ("import sim", HEAVY),
+    ("import sim.validation", HEAVY),
+    ("import sim.noise", HEAVY),
+    ("import sim.controller", HEAVY),
+    ("import sim.control_design", ("control", "matplotlib")),
+    ("import sim.kinematics", ("control", "matplotlib")),
+    ("import sim\nsim.simulate", ("control", "matplotlib")),
+    ("import sim\nsim.TorqueNoise(1.0)", HEAVY),
+])
+def test_import_loads_no_heavy_package(statement, absent):
+    mods = _loaded(statement)
+    assert not {m for m in mods if m.split(".")[0] in absent}, statement
+
+
+def test_sub_modules_load_only_what_they_import():
+    mods = {m for m in _loaded("import sim.validation\nimport sim.kinematics") if m.split(".")[0] == "sim"}
+    assert mods == {"sim", "sim.validation", "sim.kinematics", "sim.model"}
+
+
+def test_designing_a_controller_loads_python_control():
+    mods = _loaded("import sim\nsim.design_joint_controller(0.05, 0.1)")
+    assert "control" in mods
+
+
+def test_public_names_resolve_and_sim_simulate_is_the_function():
+    import sim
+    import sim.simulate  # noqa: F401  (binds the sub-module; the package attribute stays the function)
+
+    for name in sim.__all__:
+        assert getattr(sim, name) is not None, name
+    assert callable(sim.simulate) and sim.simulate.__module__ == "sim.simulate"
+    assert sim.TorqueNoise is sim.noise.TorqueNoise
+    assert sim.SimulationError is sim.validation.SimulationError
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        sim.nope  # noqa: B018
