@@ -37,8 +37,6 @@ def test_robot_names_are_loaded_on_use():
     assert "ident" in loaded and not loaded & {*HEAVY, "sim"}  # the regressor imports the kinematics when called
 
 
-@pytest.mark.xfail(strict=False, reason="sim/__init__ imports every sim module (the controller design needs "
-                                        "python-control) until it loads them on use")
 def test_import_sim_loads_no_plotting_nor_control():
     loaded = _loaded("import sim")
     assert not loaded & {"matplotlib", "control"}, sorted(loaded & {"matplotlib", "control"})
