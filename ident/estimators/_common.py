@@ -80,3 +80,20 @@ def clip_to_prior(lower, upper, lo, hi):
     if np.any(lower > upper):
         return None
     return lower, upper
+
+
+def inconsistent(message: str, W, y, b, prior):
+    """An ``ident.InconsistentDataError`` for data proven (or found) inconsistent with the prior.
+
+    ``min_bound`` is ``ident.min_consistent_bound`` of the data (zero rows appended when N < p, which does not
+    change it); ``scale_lower`` is 1 (the emptiness is the only proof, not its size).
+    """
+    from ident import InconsistentDataError, min_consistent_bound
+
+    N, p = W.shape
+    if N < p:
+        W = np.vstack([W, np.zeros((p - N, p))])
+        y = np.concatenate([y, np.zeros(p - N)])
+    mb = float(min_consistent_bound(W, y, prior))
+    return InconsistentDataError(f"{message}; the smallest consistent scalar bound is about {mb:.6g}",
+                                 min_bound=mb, bound=float(np.max(b)), scale_lower=1.0)

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident import Box, InconsistentDataError
-from ident.estimators._common import check_inputs, ia
+from ident import Box
+from ident.estimators._common import check_inputs, inconsistent, ia
 
 __all__ = ["contract", "contractor"]
 
@@ -107,13 +107,8 @@ def contractor(W, y, bound, prior, *, tol: float = 1e-6, max_sweeps: int = 500) 
         raise ValueError(f"max_sweeps must be >= 1, got {max_sweeps!r}")
     clo, chi, sweeps = contract(W, y, b, lo, hi, tol=tol, max_sweeps=int(max_sweeps))
     if clo is None:
-        from ident import min_consistent_bound
-
-        mb = min_consistent_bound(W, y, prior)
-        raise InconsistentDataError(
-            f"the interval contractor proved the data inconsistent with the prior after {sweeps} sweeps: no theta in "
-            f"the prior satisfies |y - W theta| <= bound; the smallest consistent scalar bound is about {mb:.6g}",
-            min_bound=mb, bound=float(np.max(b)), scale_lower=1.0)
+        raise inconsistent(f"the interval contractor proved the data inconsistent with the prior after {sweeps} "
+                           "sweeps: no theta in the prior satisfies |y - W theta| <= bound", W, y, b, prior)
     return Box(clo, chi, names, info={"method": "contractor", "sweeps": sweeps,
                                       "set": {"type": "box", "lower": clo.tolist(), "upper": chi.tolist()}})
 

@@ -35,8 +35,8 @@ import math
 
 import numpy as np
 
-from ident import Box, InconsistentDataError
-from ident.estimators._common import check_inputs, clip_to_prior
+from ident import Box
+from ident.estimators._common import check_inputs, clip_to_prior, inconsistent
 
 __all__ = ["ellipsoid", "strip_update"]
 
@@ -128,21 +128,15 @@ def ellipsoid(W, y, bound, prior) -> Box:
         try:
             c, P, cut = strip_update(c, P, W[k], ylo[k], yhi[k])
         except ValueError:
-            from ident import min_consistent_bound
-
-            mb = min_consistent_bound(W, y, prior)
-            raise InconsistentDataError(
-                f"the bounding ellipsoid misses the strip of row {k}: the data appear inconsistent with the prior "
-                f"and the bound; the smallest consistent scalar bound is about {mb:.6g}",
-                min_bound=mb, bound=float(np.max(b)), scale_lower=1.0) from None
+            raise inconsistent(f"the bounding ellipsoid misses the strip of row {k}: the data appear inconsistent "
+                               "with the prior and the bound", W, y, b, prior) from None
         if cut:
             cuts += 1
             P = 0.5 * (P + P.T) * inflate
     rad = np.sqrt(np.maximum(np.diag(P), 0.0)) * inflate
     clipped = clip_to_prior(c - rad, c + rad, lo, hi)
     if clipped is None:  # only through rounding: the ellipsoid contains part of the prior by construction
-        raise InconsistentDataError("the bounding ellipsoid does not meet the prior", min_bound=float("nan"),
-                                    bound=float(np.max(b)), scale_lower=1.0)
+        raise inconsistent("the bounding ellipsoid does not meet the prior", W, y, b, prior)
     return Box(clipped[0], clipped[1], names,
                info={"method": "ellipsoid", "cuts": cuts,
                      "set": {"type": "ellipsoid", "center": c.tolist(), "shape": P.tolist()}})
