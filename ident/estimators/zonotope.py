@@ -21,8 +21,19 @@ original. Reducing in batches of ``p`` rows matters: reducing after every row (b
 each time) made the F-radius grow geometrically on random data (to 1e6 within 200 rows, p = 14), while
 batches of p rows stay bounded.
 
-Not rigorous in floating point (the updates are rounded to nearest): ``rigorous = False``. The box is the
-zonotope's interval hull ``c +- |G| 1`` intersected with the prior.
+:func:`parallelotope` is the ``p``-generator special case of Chisci, Garulli & Zappa, "Recursive state
+bounding by parallelotopes", Automatica 32(7):1049-1055, 1996: with the strip narrowed as above, each
+candidate ``lambda = g_j / (w^T g_j)`` of the same family removes generator ``j``'s component along ``w``
+and replaces ``g_j`` by ``b g_j / (w^T g_j)``; this is the parallelotope bounded by the strip and the other
+``p - 1`` face pairs, of volume ``|det G| b / |w^T g_j|``. The minimum-volume candidate (``j`` maximising
+``|w^T g_j|``) is taken when it is smaller than the current parallelotope, otherwise the row is skipped.
+No order reduction is needed (p generators throughout).
+
+Measured on random data (W Gaussian, N = 20 000, p = 14, bound 0.1, prior truth +- 1): the median width
+over the exact hull's is about 2100 for the F-radius zonotope (order 3, 0.5 s) and about 710 for the
+parallelotope (0.1 s); both are shipped as references. Neither is rigorous in floating point (the updates
+are rounded to nearest): ``rigorous = False``. The box is the interval hull ``c +- |G| 1`` intersected with
+the prior.
 """
 
 from __future__ import annotations
@@ -32,7 +43,7 @@ import numpy as np
 from ident import Box
 from ident.estimators._common import check_inputs, clip_to_prior, inconsistent
 
-__all__ = ["zonotope", "zonotope_at"]
+__all__ = ["parallelotope", "zonotope", "zonotope_at"]
 
 
 def _reduce(G: np.ndarray, keep: int) -> np.ndarray:
@@ -136,3 +147,62 @@ zonotope.description = ("zonotope by sequential strip intersection (F-radius), o
                         "(not rigorous in fp)")
 zonotope.citation = ("T. Alamo, J. M. Bravo, E. F. Camacho, Guaranteed state estimation by zonotopes, Automatica "
                      "41(6):1035-1043, 2005; J. M. Bravo, T. Alamo, E. F. Camacho, IEEE TAC 51(7):1144-1150, 2006")
+
+
+def parallelotope(W, y, bound, prior) -> Box:
+    """Minimum-volume parallelotope by sequential strip intersection (Chisci, Garulli & Zappa 1996).
+
+    Parameters
+    ----------
+    W : (N, p) regressor; y : (N,) observations; bound : (N,) or scalar > 0, the error bound of each row
+        in y's units; prior : ident.Box with finite bounds (the first parallelotope).
+
+    Returns
+    -------
+    ident.Box
+        The parallelotope's interval hull intersected with the prior; ``info["set"]`` the parallelotope as a
+        zonotope with p generators (``{"type": "zonotope", "center": (p,), "generators": (p, p)}``).
+
+    Raises
+    ------
+    ident.InconsistentDataError
+        when a strip misses the parallelotope (the feasible set is then empty, up to rounding).
+    """
+    W, y, b, lo, hi, names = check_inputs(W, y, bound, prior)
+    N, p = W.shape
+    c = 0.5 * (lo + hi)
+    G = np.diag(0.5 * (hi - lo))
+    cuts = 0
+    for k in range(N):
+        w = W[k]
+        Gw = G.T @ w
+        wc = float(w @ c)
+        r = float(np.abs(Gw).sum())
+        slo = max(y[k] - b[k], wc - r)
+        shi = min(y[k] + b[k], wc + r)
+        if slo > shi:
+            raise inconsistent(f"the parallelotope misses the strip of row {k}: the data appear inconsistent with "
+                               "the prior and the bound", W, y, b, prior)
+        bk = 0.5 * (shi - slo)
+        j = int(np.argmax(np.abs(Gw)))
+        if not bk < abs(Gw[j]):
+            continue  # no candidate has a smaller volume (includes the rows that do not cut)
+        lam = G[:, j] / Gw[j]
+        c = c + lam * (0.5 * (slo + shi) - wc)
+        G = G - np.outer(lam, Gw)
+        G[:, j] = bk * lam
+        cuts += 1
+    rad = np.abs(G).sum(axis=1)
+    clipped = clip_to_prior(c - rad, c + rad, lo, hi)
+    if clipped is None:
+        raise inconsistent("the parallelotope does not meet the prior", W, y, b, prior)
+    return Box(clipped[0], clipped[1], names,
+               info={"method": "parallelotope", "cuts": cuts,
+                     "set": {"type": "zonotope", "center": c.tolist(), "generators": G.tolist()}})
+
+
+parallelotope.kind = "guaranteed"
+parallelotope.rigorous = False
+parallelotope.description = "minimum-volume parallelotope by sequential strip intersection (not rigorous in fp)"
+parallelotope.citation = ("L. Chisci, A. Garulli, G. Zappa, Recursive state bounding by parallelotopes, Automatica "
+                          "32(7):1049-1055, 1996")

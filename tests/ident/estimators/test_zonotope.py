@@ -6,7 +6,7 @@ import pytest
 from scipy.optimize import linprog
 
 from ident import Box, InconsistentDataError
-from ident.estimators.zonotope import _reduce, zonotope, zonotope_at
+from ident.estimators.zonotope import _reduce, parallelotope, zonotope, zonotope_at
 from tests.ident.estimators import oracles
 
 
@@ -80,3 +80,31 @@ def test_factory_and_attributes():
     with pytest.raises(ValueError, match="order"):
         zonotope_at(0)
     assert zonotope.kind == "guaranteed" and zonotope.rigorous is False
+
+
+@pytest.mark.parametrize("seed, p, N", [(0, 2, 50), (1, 3, 400), (2, 4, 2000), (3, 6, 600)])
+def test_parallelotope_contains_exact_hull_and_feasible_points(seed, p, N):
+    rng = np.random.default_rng(seed)
+    W, y, b, prior, theta = oracles.problem(rng, p, N)
+    box = parallelotope(W, y, b, prior)
+    lo, hi = oracles.exact_hull(W, y, b, prior)
+    assert oracles.box_contains(box, lo, hi)
+    Z = box.info["set"]
+    assert np.asarray(Z["generators"]).shape == (p, p)
+    pts = oracles.feasible_points(rng, W, y, b, prior, vertices=10, walk=60)
+    assert all(_in_zonotope(Z, x) for x in pts)
+    assert np.all(box.width < prior.width)
+
+
+def test_parallelotope_hand_case():
+    # the square [-1, 1]^2 and the strip |t1 + t2| <= 0.5: both generators have w^T g = 1, the first is replaced
+    # (argmax takes the first): generators [e1 - e1, e2 - e1] = [0, (-1, 1)] then g1 = 0.5 e1, so the
+    # parallelotope {(0.5 a - b, b)}: the box [-1.5, 1.5] x [-1, 1] ∩ prior = the prior (by hand), and the
+    # parallelotope has area 4 * 0.5 = 2 (|det G| b / |w^T g_j| * 4 with det 1)
+    box = parallelotope(np.array([[1.0, 1.0]]), np.array([0.0]), np.array([0.5]), Box([-1.0, -1.0], [1.0, 1.0]))
+    G = np.asarray(box.info["set"]["generators"])
+    np.testing.assert_allclose(G, [[0.5, -1.0], [0.0, 1.0]], atol=1e-15)
+    assert 4 * abs(np.linalg.det(G)) == pytest.approx(2.0)
+    # the cut square itself has area 4 - 2 * 1.5^2 / 2 = 1.75 (two corner triangles with legs 1.5 removed)
+    assert 4 * abs(np.linalg.det(G)) >= 1.75
+    assert parallelotope.kind == "guaranteed" and parallelotope.rigorous is False and "Chisci" in parallelotope.citation
