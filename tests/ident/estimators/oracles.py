@@ -4,6 +4,8 @@ hit-and-run from the Chebyshev centre)."""
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 from scipy.optimize import linprog
 
@@ -82,3 +84,18 @@ def box_contains(box, lo, hi, rel: float = 1e-9):
     """True when the box contains [lo, hi] up to ``rel`` times the prior-scale of each coordinate."""
     scale = rel * np.maximum(np.abs(lo) + np.abs(hi), 1.0)
     return bool(np.all(box.lower <= lo + scale) and np.all(box.upper >= hi - scale))
+
+
+def critical_case(rng, p: int, N: int):
+    """Bounds equal to the exact residual at the truth, rounded up to the next float: the truth is feasible,
+    on the boundary of every strip."""
+    W = rng.uniform(-1.0, 1.0, (N, p)) / 3.0
+    theta = rng.normal(size=p) / 7.0
+    y = W @ theta + rng.normal(size=N) * 1e-3
+    b = np.empty(N)
+    tq = [Fraction(float(v)) for v in theta]
+    for k in range(N):
+        r = abs(Fraction(float(y[k])) - sum(Fraction(float(W[k, j])) * tq[j] for j in range(p)))
+        f = float(r)
+        b[k] = f if Fraction(f) >= r else np.nextafter(f, np.inf)
+    return W, y, b, theta

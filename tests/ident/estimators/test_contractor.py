@@ -101,21 +101,6 @@ def test_equals_exact_rational_reimplementation():
     np.testing.assert_allclose(hi, ehi, rtol=0, atol=1e-12)
 
 
-def _critical_case(rng, p, N):
-    """Bounds equal to the exact residual at the truth, rounded up to the next float: the truth is feasible,
-    on the boundary of every strip."""
-    W = rng.uniform(-1.0, 1.0, (N, p)) / 3.0
-    theta = rng.normal(size=p) / 7.0
-    y = W @ theta + rng.normal(size=N) * 1e-3
-    b = np.empty(N)
-    tq = [Fraction(float(v)) for v in theta]
-    for k in range(N):
-        r = abs(Fraction(float(y[k])) - sum(Fraction(float(W[k, j])) * tq[j] for j in range(p)))
-        f = float(r)
-        b[k] = f if Fraction(f) >= r else np.nextafter(f, np.inf)
-    return W, y, b, theta
-
-
 def _naive(W, y, b, lo, hi, sweeps=50):
     """The contractor without outward rounding (for comparison only)."""
     for _ in range(sweeps):
@@ -133,7 +118,7 @@ def test_critical_bounds_keep_the_truth():
     naive_cuts = 0
     for seed in range(20):
         rng = np.random.default_rng(seed)
-        W, y, b, theta = _critical_case(rng, 2, 6)
+        W, y, b, theta = oracles.critical_case(rng, 2, 6)
         prior = Box(theta - 1e-3, theta + 1e-3)
         box = contractor(W, y, b, prior, tol=1e-12)
         assert box.contains(theta).all(), seed

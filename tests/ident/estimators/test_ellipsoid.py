@@ -118,3 +118,14 @@ def test_initial_ellipsoid_contains_prior_corners():
 def test_attributes():
     assert ellipsoid.kind == "guaranteed" and ellipsoid.rigorous is False
     assert "Fogel" in ellipsoid.citation and ellipsoid.description
+
+
+def test_critical_bounds_keep_the_truth():
+    # not a proof (rigorous = False): a regression check of the shape inflation on cases where the truth lies
+    # on the boundary of every strip (bounds = exact residuals rounded up)
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        W, y, b, theta = oracles.critical_case(rng, 2 + seed % 3, 40)
+        box = ellipsoid(W, y, b, Box(theta - 0.05, theta + 0.05))
+        assert box.contains(theta).all(), seed
+        assert np.all(_inside(box.info["set"], theta[None, :], tol=0.0))

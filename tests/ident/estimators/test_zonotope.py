@@ -108,3 +108,14 @@ def test_parallelotope_hand_case():
     # the cut square itself has area 4 - 2 * 1.5^2 / 2 = 1.75 (two corner triangles with legs 1.5 removed)
     assert 4 * abs(np.linalg.det(G)) >= 1.75
     assert parallelotope.kind == "guaranteed" and parallelotope.rigorous is False and "Chisci" in parallelotope.citation
+
+
+@pytest.mark.parametrize("f", [zonotope, parallelotope])
+def test_critical_bounds_keep_the_truth(f):
+    # not a proof (rigorous = False): a regression check of the strip-widening safeguard on cases where the
+    # truth lies on the boundary of every strip (bounds = exact residuals rounded up)
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        W, y, b, theta = oracles.critical_case(rng, 2 + seed % 3, 40)
+        box = f(W, y, b, Box(theta - 0.05, theta + 0.05))
+        assert box.contains(theta).all(), seed
