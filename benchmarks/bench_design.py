@@ -31,7 +31,7 @@ import scipy.stats
 import ident
 import sim
 import trajectories as tj
-from ident.filtering import ProcessingSettings
+from ident.processing.filtering import ProcessingSettings
 from scenarios.experiment import run_experiment
 from scenarios.spec import load_spec
 

@@ -30,7 +30,7 @@ import _setup  # noqa: F401  (BLAS threads, repository root; before numpy)
 import numpy as np  # noqa: E402
 
 import ident  # noqa: E402
-from ident.online import OnlineHull  # noqa: E402
+from ident.estimators.online import OnlineHull  # noqa: E402
 
 P = 14
 DT = 1e-3

@@ -1,24 +1,45 @@
-"""Identification: interval arithmetic, the H4 regressor, data processing and estimators."""
+"""Identification: interval arithmetic, the H4 regressor, data processing and estimators.
 
-from ident.parameters import N_PARAMETERS, NOMINAL_PARAMETERS, PARAMETER_NAMES, PARAMETER_UNITS, Box
+The layers: :mod:`ident.numerics` (interval arithmetic, HiGHS), :mod:`ident.estimators` (any ``(W, y, bound,
+prior)``), :mod:`ident.processing` (filters, the paper's chain), :mod:`ident.robots` (the H4, URDF serial robots,
+the TX40 log); :mod:`ident.box` and :mod:`ident.errors` are shared by all. ``import ident`` loads the estimators
+only; the robot-side names below (the H4 regressor and its parameters, the serial robots) are imported on first
+use (PEP 562), so that the package loads neither mujoco, python-control, matplotlib, pinocchio nor rerun.
+"""
 
-__all__ = ["Box", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS"]
-from ident.regressor import EXTRA_NAMES, inverse_dynamics, parameter_names, parameter_units, regressor  # noqa: E402
+from importlib import import_module
 
-__all__ += ["EXTRA_NAMES", "inverse_dynamics", "parameter_names", "parameter_units", "regressor"]
-from ident.estimate import InconsistentDataError, UnidentifiableError, estimate, min_consistent_bound  # noqa: E402
-from ident.wls import WLSResult, wls  # noqa: E402
+from ident.box import Box
+from ident.errors import (EstimatorError, InconsistentDataError, LPError, LPFallbackWarning, OutlierBudgetError,
+                          ProcessingError, UnidentifiableError)
+from ident.estimators.estimate import estimate, min_consistent_bound
+from ident.estimators.online import OnlineHull
+from ident.estimators.outliers import OutlierRows, detect_outliers, relaxed_hull
+from ident.estimators.uncertain import Distortion, IntervalEquation, interval_equation, interval_regressor, uncertain_hull
+from ident.estimators.wls import WLSResult, wls
 
-__all__ += ["InconsistentDataError", "UnidentifiableError", "WLSResult", "estimate", "min_consistent_bound", "wls"]
-from ident.online import OnlineHull  # noqa: E402
-from ident.outliers import OutlierBudgetError, OutlierRows, detect_outliers, relaxed_hull  # noqa: E402
-from ident.uncertain import Distortion, IntervalEquation, interval_equation, interval_regressor, uncertain_hull  # noqa: E402
+_LAZY = {
+    "ident.robots.h4": ("EXTRA_NAMES", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS",
+                        "inverse_dynamics", "parameter_names", "parameter_units", "regressor"),
+    "ident.robots.serial": ("BaseParameters", "SerialRobot", "base_parameters"),
+}
+_LAZY_NAME = {name: module for module, names in _LAZY.items() for name in names}
 
-__all__ += ["Distortion", "IntervalEquation", "OnlineHull", "OutlierBudgetError", "OutlierRows", "detect_outliers",
-            "interval_equation", "interval_regressor", "relaxed_hull", "uncertain_hull"]
-from ident.lpsolver import LPError, LPFallbackWarning  # noqa: E402
+__all__ = ["Box", "Distortion", "EstimatorError", "InconsistentDataError", "IntervalEquation", "LPError",
+           "LPFallbackWarning", "OnlineHull", "OutlierBudgetError", "OutlierRows", "ProcessingError",
+           "UnidentifiableError", "WLSResult", "detect_outliers", "estimate", "interval_equation",
+           "interval_regressor", "min_consistent_bound", "relaxed_hull", "uncertain_hull", "wls",
+           *sorted(_LAZY_NAME)]
 
-__all__ += ["LPError", "LPFallbackWarning"]
-from ident.serial import BaseParameters, SerialRobot, base_parameters  # noqa: E402  (pinocchio loaded on use)
 
-__all__ += ["BaseParameters", "SerialRobot", "base_parameters"]
+def __getattr__(name: str):
+    module = _LAZY_NAME.get(name)
+    if module is None:
+        raise AttributeError(f"module 'ident' has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY_NAME))

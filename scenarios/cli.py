@@ -258,11 +258,14 @@ def identify(
     2 bad option, file or data (one error line on stderr);
     3 the data are proven inconsistent with the bound (result.json still written, with the smallest consistent bound).
     """
-    from scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError
+    from scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError, check_method
 
     try:
-        if method not in METHODS:
-            raise OptionError(f"--method must be one of {' | '.join(METHODS)}, got {method!r}")
+        try:
+            check_method(method)
+        except ValueError:
+            raise OptionError(f"--method must be one of {' | '.join(METHODS)} (or an estimator plugin), "
+                              f"got {method!r}") from None
         if urdf is not None:
             if torque_timing != "hold":
                 raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
@@ -308,7 +311,7 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
                               f"{name} {value}")
     if not Path(urdf).is_file():
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
-    from ident.serial import SerialRobot
+    from ident.robots.serial import SerialRobot
 
     try:
         n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints

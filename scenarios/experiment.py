@@ -14,8 +14,8 @@ import numpy as np
 
 import ident
 import sim
-from ident.filtering import ProcessingSettings
-from ident.processing import Equation, build_equation
+from ident.processing.filtering import ProcessingSettings
+from ident.processing.processing import Equation, build_equation
 from scenarios.budget import error_budget
 from scenarios.explain import width_analysis
 

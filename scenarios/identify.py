@@ -27,14 +27,29 @@ import numpy as np
 
 import ident
 import sim
-from ident.filtering import ProcessingSettings
-from ident.processing import BLOCK_SAMPLES, build_equation
+from ident.errors import EstimatorError
+from ident.estimators import registry
+from ident.processing.filtering import ProcessingSettings
+from ident.processing.processing import BLOCK_SAMPLES, build_equation
 from scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 from scenarios.spec import DEFAULTS
 
-METHODS = ("hull", "cgsp", "wls")
+METHODS = (*registry.BUILTINS, "wls")  # the built-in box estimators (any the registry resolves works) and WLS
 N_JOINTS = 4
 EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (InconsistentDataError)
+
+
+def check_method(method) -> str:
+    """``"wls"`` or a box estimator the registry resolves (:func:`ident.estimators.registry.get`); ValueError
+    naming the choices otherwise."""
+    if method == "wls":
+        return method
+    try:
+        registry.get(method)
+    except (EstimatorError, TypeError) as exc:
+        raise ValueError(f"method must be one of {METHODS} (or an estimator plugin), got {method!r}: {exc}") \
+            from None
+    return method
 
 
 class OptionError(ValueError):
@@ -170,7 +185,7 @@ def _prior_box(prior) -> "ident.Box":
             raise ValueError(f"prior of {name} must be finite, got [{lo[j]}, {hi[j]}]")
         if not lo[j] < hi[j]:
             raise ValueError(f"prior of {name} must have lower < upper, got [{lo[j]:g}, {hi[j]:g}]")
-    return ident.Box(lo, hi)
+    return ident.Box(lo, hi, ident.PARAMETER_NAMES)
 
 
 def _joint_bounds(bound) -> np.ndarray:
@@ -193,14 +208,13 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     """Identify the 14 parameters from a CSV log and write ``result.json`` in ``out``.
 
     bound : raw-row bound [N m], one number or (4,) per joint; prior : (lower, upper) numbers, (14,) arrays
-    each, or a Box; block_samples : processing block length (:func:`ident.processing.build_equation`);
+    each, or a Box; block_samples : processing block length (:func:`ident.processing.processing.build_equation`);
     torque_timing : "hold" (each logged torque is a command held over its step: the regressor at mid-step) or
-    "sample" (a torque measured at the sample instant), :func:`ident.filtering.derivatives`.
+    "sample" (a torque measured at the sample instant), :func:`ident.processing.filtering.derivatives`.
     Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
     (the method's status ``failed`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    check_method(method)
     b = _joint_bounds(bound)
     box_prior = _prior_box(prior)
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
@@ -281,22 +295,21 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
                       decimation: int = URDF_PROCESSING["decimation"], out=None) -> dict:
     """Identify a serial robot's base parameters from a joint-side CSV log; write ``result.json`` in ``out``.
 
-    urdf : the robot (:class:`ident.serial.SerialRobot`, n actuated joints; friction, rotor_inertia, offset
+    urdf : the robot (:class:`ident.robots.serial.SerialRobot`, n actuated joints; friction, rotor_inertia, offset
     select its extra columns; coupled_wrist : None or 0-based joints (a, b), the motor of b turning with a);
     path : CSV ``t, q1..qn, tau1..taun`` (:func:`read_serial_log`); bound : raw-row
     bound on ``|tau - W theta|`` [N m], one number or (n,) per joint; method : hull | cgsp | wls.
-    Prior: :func:`ident.serial.physical_prior` with total mass ``mass`` [kg] (default the URDF's total mass
-    times :data:`MASS_FACTOR`), ``reach`` [m] (default :func:`ident.serial.default_reach`: the sum of the
+    Prior: :func:`ident.robots.serial.physical_prior` with total mass ``mass`` [kg] (default the URDF's total mass
+    times :data:`MASS_FACTOR`), ``reach`` [m] (default :func:`ident.robots.serial.default_reach`: the sum of the
     joint-origin offsets plus the last link's centre-of-mass distance), ``rotor_inertia_max`` [kg m^2]
     (joint side; default M r^2) and offsets within :data:`OFFSET_FRACTION` x the effort limit, mapped exactly to
     the base parameters (``BaseParameters.box_from_standard``). Processing: :data:`URDF_PROCESSING` with
     ``cutoff_hz`` [Hz] and ``decimation``. Returns the result dict; data proven inconsistent with the bound give
     ``result["consistent"] = False`` (and the method's ``min_bound``), not an exception.
     """
-    from ident.serial import SerialRobot, default_reach, physical_prior, process
+    from ident.robots.serial import SerialRobot, default_reach, physical_prior, process
 
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    check_method(method)
     urdf = Path(urdf)
     if not urdf.is_file():
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
@@ -352,7 +365,7 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
         "prior": {"lower": blo.tolist(), "upper": bhi.tolist(), "standard_lower": lo_s.tolist(),
                   "standard_upper": hi_s.tolist(), "total_mass": M, "urdf_mass": urdf_mass, "reach": r,
                   "rotor_inertia_max": rotor_inertia_max, "offset_fraction": OFFSET_FRACTION,
-                  "source": "ident.serial.physical_prior mapped by the base-parameter matrix"},
+                  "source": "ident.robots.serial.physical_prior mapped by the base-parameter matrix"},
         # processed rows [N m]; divided by ||h||_1: the raw-row scalar bound it corresponds to (approximately)
         "min_consistent_bound": t_min, "min_consistent_bound_raw": t_min / eq.gain,
         "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,

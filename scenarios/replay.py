@@ -9,7 +9,7 @@ What the recording holds (one timeline, ``sim_time``: a duration in seconds, the
 * ``reference/...``: what the controller tracks, as a ghost: the reference nacelle path (static) and a pale
   H at the reference pose, at the same rate;
 * ``series/<quantity>/joint<i>/<signal>`` at the full sample rate: q (measured against exact), qd and qdd
-  (estimated by the processing chain, :func:`ident.filtering.derivatives` with ``run.settings``, against
+  (estimated by the processing chain, :func:`ident.processing.filtering.derivatives` with ``run.settings``, against
   exact), the motor torques (commanded = measured, applied, noise = applied - commanded) and the residual
   ``y - W theta_true`` of the processed rows against ``+- bound`` at ``dataset.t[equation.sample]``;
 * ``estimate/<parameter>/<method>/lower|upper`` and ``estimate/<parameter>/true``: the box history of
@@ -20,7 +20,7 @@ What the recording holds (one timeline, ``sim_time``: a duration in seconds, the
 
 Bulk data goes through ``send_columns`` (one call per series or per 3D entity), never one call per sample.
 Rerun is imported inside the functions only (it is the scenario layer's optional viewer, not a dependency of
-the numerics). Field notes on the Rerun 0.41 API: NOTES.md, section "rerun-sdk 0.41".
+the numerics). The calls are those of rerun-sdk 0.41 (the version pinned in pyproject.toml).
 
 Cost: the 3D scene and series are a few tens of ``send_columns`` calls (0.2-0.3 s for a 10 s run, a ~9 MB
 file); the box history runs each estimator on ``points - 1`` growing prefixes of the rows (the full-data box is
@@ -263,7 +263,7 @@ def _log_scene(rec, rr, run, scene_hz: float) -> None:
 
 
 def _log_signals(rec, rr, run) -> None:
-    from ident.filtering import derivatives
+    from ident.processing.filtering import derivatives
 
     ds, truth, s = run.dataset, run.truth, run.settings
     t = np.asarray(ds.t, dtype=float)

@@ -11,6 +11,9 @@ import copy
 import tomllib
 from pathlib import Path
 
+from ident.errors import EstimatorError
+from ident.estimators import registry
+
 SPEC_DIR = Path(__file__).resolve().parent
 
 
@@ -35,7 +38,7 @@ DEFAULTS: dict = {
     "encoder": {"counts_per_turn": 20000},
     "bound": {"allowance": 0.5},  # assumed raw-row bound = noise.bound + allowance [N m]
     # torque_timing "hold": the simulator (like a joint controller's log of its commands) holds each torque over
-    # its step, so the regressor is evaluated at mid-step (ident.filtering.derivatives)
+    # its step, so the regressor is evaluated at mid-step (ident.processing.filtering.derivatives)
     "processing": {"position_cutoff_hz": 20.0, "butter_order": 4, "decimation": 10, "numtaps": 41,
                    "fir_cutoff": 0.8, "speed_threshold": 0.05, "torque_timing": "hold"},
     "prior": {"lower": 0.0, "upper": 2.0},
@@ -73,7 +76,6 @@ def _merge(base: dict, override: dict, where: str) -> dict:
     return out
 
 
-BOX_METHODS = ("hull", "cgsp")  # the set-membership methods of ident.estimate
 NOISE_SHAPES = ("uniform", "square", "sine", "none", "realistic", "model")  # see DEFAULTS["noise"]
 CRITERIA = ("cond", "h")
 LIMITS = ("default", "h4_class")
@@ -89,8 +91,20 @@ def _check_list(value, where: str, allowed: tuple[str, ...], allow_empty: bool) 
         raise ScenarioError(f"{where} must be a list of strings from {allowed}, got unknown {unknown}")
 
 
+def _check_methods(value, where: str) -> None:
+    """Box estimators: any name the estimator registry resolves (a built-in, an entry point, module:attribute)."""
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ScenarioError(f"{where} must be a list of estimator names (built-in: {tuple(registry.BUILTINS)}), "
+                            f"got {value!r}")
+    for v in value:
+        try:
+            registry.get(v)
+        except (EstimatorError, TypeError) as exc:
+            raise ScenarioError(f"{where}: {exc}") from None
+
+
 def _check_lists(spec: dict) -> None:
-    _check_list(spec["estimators"]["methods"], "estimators.methods", BOX_METHODS, allow_empty=True)
+    _check_methods(spec["estimators"]["methods"], "estimators.methods")
     _check_list(spec["campaign"]["noise_shapes"], "campaign.noise_shapes", NOISE_SHAPES, allow_empty=False)
     if spec["noise"]["shape"] not in NOISE_SHAPES:
         raise ScenarioError(f"noise.shape must be one of {NOISE_SHAPES}, got {spec['noise']['shape']!r}")

@@ -1,9 +1,13 @@
-"""The house rules, checked on the source (DESIGN.md, "Imports run one way"):
+"""The house rules, checked on the source (imports run one way; what runs is checked in ``tests/test_imports.py``):
 
 - no import cycle among the project's modules (function-level imports count; the scenario registry's discovery
   of the kind modules counts as an import of each of them);
-- no private name (``_x``) imported from another package;
+- no private name (``_x``) imported from another package, nor from a module of another sub-package
+  (``ident.estimators`` from ``ident.numerics``, ``scenarios.kinds`` from ``scenarios``, ...);
 - the packages import one way: scenarios -> trajectories -> ident -> sim (never backwards);
+- the layers of ident: ``ident.estimators`` and ``ident.numerics`` import neither ``ident.robots``,
+  ``ident.processing``, ``sim``, ``mujoco`` nor plotting; ``ident.processing`` imports no robot; only
+  ``ident.robots`` imports ``sim``;
 - no scenario kind imports another kind, and the runner reaches the kinds only through the registry.
 """
 
@@ -104,7 +108,7 @@ def test_the_graph_sees_the_known_edges():
     """The checker itself: edges that exist must be found (a graph that finds nothing would pass everything)."""
     assert "scenarios.registry" in GRAPH["scenarios.runner"]
     assert "scenarios.kinds.paper" in GRAPH["scenarios.registry"]
-    assert "ident.filtering" in GRAPH["ident.processing"]
+    assert "ident.processing.filtering" in GRAPH["ident.processing.processing"]
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
@@ -128,6 +132,70 @@ def test_no_private_name_crosses_a_package():
             if top in PACKAGES and any(p.startswith("_") and not p.startswith("__") for p in module.split(".")[1:]) \
                     and top != name.split(".")[0]:
                 crossing.append(f"{name}: import {module}")
+    assert crossing == []
+
+
+def _external(name: str, path: Path) -> set[str]:
+    """Top-level names of every module imported by ``name`` (the project's and third-party ones)."""
+    return {module.split(".")[0] for module, _ in _imports(name, path) if module}
+
+
+def _layer_violations(layer: str, forbidden_project: tuple[str, ...], forbidden_external: tuple[str, ...]):
+    out = []
+    for name, path in MODULES.items():
+        if name != layer and not name.startswith(layer + "."):
+            continue
+        out += [f"{name} -> {t}" for t in sorted(GRAPH[name]) if t.startswith(forbidden_project)]
+        out += [f"{name} -> {e}" for e in sorted(_external(name, path) & set(forbidden_external))]
+    return out
+
+
+PLOTTING = ("matplotlib", "rerun")
+#: known until the uncertain hull is split into its generic half (estimators) and the H4 interval regressor
+#: (robots), and the equation builder takes the regressor as an argument
+PENDING = {"ident.estimators.uncertain -> ident.processing.filtering",
+           "ident.processing.processing -> ident.robots.h4"}
+
+
+@pytest.mark.parametrize("layer", ["ident.estimators", "ident.numerics"])
+def test_estimators_and_numerics_import_no_robot_processing_simulator_or_plotting(layer):
+    found = _layer_violations(layer, ("ident.robots", "ident.processing", "sim"), ("sim", "mujoco", *PLOTTING))
+    assert sorted(set(found) - PENDING) == []
+
+
+def test_processing_imports_no_robot_and_only_robots_import_sim():
+    found = _layer_violations("ident.processing", ("ident.robots", "sim"), ("sim", "mujoco", *PLOTTING))
+    for name, path in MODULES.items():
+        if name.startswith("ident") and not name.startswith("ident.robots") and "sim" in _external(name, path):
+            found.append(f"{name} -> sim")
+    assert sorted(set(found) - PENDING) == []
+
+
+@pytest.mark.xfail(strict=True, reason="the pending layer crossings still exist; remove them from PENDING when "
+                                       "they are gone")
+def test_the_pending_crossings_are_still_there():
+    found = set(_layer_violations("ident.estimators", ("ident.processing",), ()))
+    found |= set(_layer_violations("ident.processing", ("ident.robots",), ()))
+    assert not PENDING <= found  # xfail while every pending crossing is still found
+
+
+def test_the_layer_check_sees_a_crossing():
+    """The checker itself: the robot layer does import sim (lazily), and a crossing there must be found."""
+    assert any(v.startswith("ident.robots.h4 -> sim") for v in _layer_violations("ident.robots", ("sim",), ()))
+
+
+def _subpackage(name: str) -> str:
+    path = MODULES[name]
+    return name if path.name == "__init__.py" else name.rpartition(".")[0]
+
+
+def test_no_private_name_crosses_a_subpackage():
+    crossing = []
+    for name, path in MODULES.items():
+        for module, names in _imports(name, path):
+            if module in MODULES and _subpackage(module) != _subpackage(name):
+                crossing += [f"{name}: from {module} import {n}" for n in names
+                             if n.startswith("_") and not n.startswith("__")]
     assert crossing == []
 
 

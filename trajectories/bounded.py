@@ -37,8 +37,8 @@ import highspy
 import numpy as np
 
 import ident
-from ident.lpsolver import new_highs
-from ident.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
+from ident.numerics.lp import new_highs
+from ident.processing.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
 from trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem, grid_regressor
 
 #: Column bound of the half-width LPs: keeps every LP bounded when W is rank-deficient (then h_j = BIG).
@@ -145,8 +145,8 @@ def smooth_max(h, targets, beta: float = BETA):
 def processed_regressor(geometry, q, qd, qdd, settings: ProcessingSettings | None = None, structure="paper"):
     """The noise-free processed regressor of a reference (q, qd, qdd (n, 4) [rad, rad/s, rad/s^2]):
     ``ident.regressor`` on the reference, then the identification's parallel filter and decimation
-    (``ident.filtering.parallel_filter`` with ``settings.taps()``) and the same low-speed exclusion
-    (``exclude_low_speed`` + ``propagate_mask``, as ``ident.processing.build_equation``).
+    (``ident.processing.filtering.parallel_filter`` with ``settings.taps()``) and the same low-speed exclusion
+    (``exclude_low_speed`` + ``propagate_mask``, as ``ident.processing.processing.build_equation``).
 
     Returns (W (m, p), joint (m,) joint index of each row). The Butterworth/difference stage of the real
     processing acts on measured positions and is not modelled (the reference's derivatives are exact).

@@ -109,7 +109,7 @@ def design_excitation(geometry, duration: float = 10.0, seed: int = 0, limits=No
     geometry : :class:`sim.H4Geometry`; duration [s]; seed : seeds the start; limits : :class:`Limits`
     (default :meth:`Limits.h4_class`, the H4-class envelope); criterion : ``"h"`` (smooth max of the relative
     bounded-error half-widths on the processed regressor) or ``"cond"``; processing :
-    ``ident.filtering.ProcessingSettings`` or a dict of its fields (the scenario's ``[processing]`` table; default
+    ``ident.processing.filtering.ProcessingSettings`` or a dict of its fields (the scenario's ``[processing]`` table; default
     ``ProcessingSettings()``); targets : (14,) > 0, default the nominal parameters; cache : look up / store the
     design in :func:`cache_dir`; theta_nominal : (14,) for the torque check (default
     ``trajectories.nominal_parameters()``); harmonics, base_hz : default :data:`DEFAULT_OPTIONS`; other keyword

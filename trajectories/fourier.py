@@ -50,7 +50,7 @@ import numpy as np
 
 import ident
 import sim
-from ident.filtering import ProcessingSettings
+from ident.processing.filtering import ProcessingSettings
 # unchecked, vectorised (no re-validation)
 from sim.kinematics import ik_unchecked, jacobian_dot_unchecked, jacobians_unchecked
 from trajectories.bounded import HalfwidthProblem, as_targets
@@ -179,7 +179,7 @@ def as_processing(processing, dt: float) -> ProcessingSettings:
         except TypeError as exc:
             raise ValueError(f"processing must hold ProcessingSettings fields, got keys {sorted(processing)}: "
                              f"{exc}") from exc
-    raise TypeError(f"processing must be None, an ident.filtering.ProcessingSettings or a dict, got "
+    raise TypeError(f"processing must be None, an ident.processing.filtering.ProcessingSettings or a dict, got "
                     f"{type(processing).__name__}")
 
 
@@ -236,7 +236,7 @@ def fourier_excitation(geometry, duration: float = 10.0, harmonics: int = 5, bas
     it on the optimiser's coarse grid; max_iter : SLSQP iterations; grid_per_period : coarse-grid samples per
     period of the highest harmonic in the fast phase; criterion : ``"cond"`` (log cond(W diag(theta_nominal)),
     the default) or ``"h"`` (bounded-error: smooth max of the relative half-widths h_j / targets_j,
-    :mod:`trajectories.bounded`); processing : ``ident.filtering.ProcessingSettings`` or a dict of its fields
+    :mod:`trajectories.bounded`); processing : ``ident.processing.filtering.ProcessingSettings`` or a dict of its fields
     (the identification's speed threshold and filter window, used by ``"h"``); targets : (14,) for ``"h"``
     (default the nominal parameters).
 

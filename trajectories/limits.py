@@ -59,16 +59,13 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ident import NOMINAL_PARAMETERS as _NOMINAL
 from ident import PARAMETER_NAMES
-
-#: Nominal parameters by name: ``ident.NOMINAL_PARAMETERS`` (its source is documented there).
-NOMINAL_PARAMETERS: dict[str, float] = dict(zip(PARAMETER_NAMES, _NOMINAL))
+from ident import NOMINAL_PARAMETERS  # the one definition, in ident.robots.h4 (its source is documented there)
 
 
 def nominal_parameters() -> np.ndarray:
     """The nominal parameter vector (14,) in :data:`ident.PARAMETER_NAMES` order (SI units)."""
-    return np.asarray(_NOMINAL, dtype=float)
+    return np.asarray(NOMINAL_PARAMETERS, dtype=float)
 
 
 def as_theta(theta_nominal) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Kind ``enclosure_critical``: a campaign whose enclosure check can fail.
 
 Every processed row's bound is a rigorous upper bound, rounded outward, of that row's own oracle residual
-``|y_k - W_k theta_true|`` (interval evaluation of ``W_k theta_true``, :func:`ident.interval.point_matmul`), so
+``|y_k - W_k theta_true|`` (interval evaluation of ``W_k theta_true``, :func:`ident.numerics.interval.point_matmul`), so
 the true parameters are feasible but touch many strips and the feasible set is tiny: the boxes are orders of
 magnitude narrower than in the ordinary campaign, and any unsound rounding in an estimator (a safe bound that is
 not safe, a scaling that is not exact, a fallback that shrinks) shows as a miss. The bounds are derived from the
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.interval import down, point_matmul, up
+from ident.numerics.interval import down, point_matmul, up
 from scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
 from scenarios.experiment import estimate_boxes
 from scenarios.spec import ScenarioError

@@ -14,8 +14,9 @@ import numpy as np
 
 import ident
 import sim
-from ident.outliers import OutlierBudgetError, relaxed_hull
-from ident.processing import build_equation
+from ident.estimators.outliers import METHODS as OUTLIER_METHODS
+from ident.estimators.outliers import OutlierBudgetError, relaxed_hull
+from ident.processing.processing import build_equation
 from scenarios import report
 from scenarios.experiment import ExperimentRun, estimate_hull, run_experiment
 from scenarios.rundir import save_run_files, sim_progress
@@ -51,8 +52,8 @@ def _check_outliers_spec(cfg: dict) -> None:
             raise ScenarioError(f"outliers.{key} must be an integer >= {1 if key == 'count' else 0}, got {cfg[key]!r}")
     if not (np.isfinite(cfg["magnitude"]) and cfg["magnitude"] > 0):
         raise ScenarioError(f"outliers.magnitude must be a finite number > 0 [N m], got {cfg['magnitude']!r}")
-    if cfg["method"] not in ("auto", "exact", "groups"):
-        raise ScenarioError(f"outliers.method must be one of ('auto', 'exact', 'groups'), got {cfg['method']!r}")
+    if cfg["method"] not in OUTLIER_METHODS:
+        raise ScenarioError(f"outliers.method must be one of {OUTLIER_METHODS}, got {cfg['method']!r}")
 
 
 def run(spec: dict, seed: int, out: Path, progress) -> dict:

@@ -2,7 +2,7 @@
 
 The H4 scenarios know the truth; here nothing is known but the log. The study (:func:`run_tx40`):
 
-1. the paper's processing (:func:`ident.serial.process`): zero-phase Butterworth on q, central differences,
+1. the paper's processing (:func:`ident.robots.serial.process`): zero-phase Butterworth on q, central differences,
    the TX40 base regressor (URDF, pinocchio), parallel filter + decimation with the bound propagated
    (``|h| * b = ||h||_1 b`` plus the filter's rigorous rounding); the first ``identify_fraction`` of the log
    identifies, the rest validates (processed separately: no sample is shared);
@@ -10,10 +10,10 @@ The H4 scenarios know the truth; here nothing is known but the log. The study (:
 3. the minimum consistent bound: all rows, each joint alone, and the joint-shaped bound ``s t_j`` (the
    smallest common scale s of the per-joint minima t_j that makes all rows consistent); what part is
    friction-model error and what part noise: the same minima with a richer friction law (direction-dependent
-   viscous, Stribeck, quadratic; :func:`ident.serial.rich_friction_columns`), and the residual spectrum (the
+   viscous, Stribeck, quadratic; :func:`ident.robots.serial.rich_friction_columns`), and the residual spectrum (the
    in-band level against the high-frequency noise floor);
 4. hull boxes (:func:`ident.estimate`) at ``factors`` times the joint-shaped bound, in a physical prior
-   (:func:`ident.tx40.standard_prior` mapped exactly to the base parameters);
+   (:func:`ident.robots.tx40.standard_prior` mapped exactly to the base parameters);
 5. the q-relaxed hull (:func:`ident.relaxed_hull`) at ``outlier_factor`` (< 1) times that bound: rows proven
    outliers (certain) whatever theta in the relaxed box;
 6. held-out validation: the guaranteed torque envelope ``[min, max] W_k theta`` over each box (rigorous interval
@@ -107,12 +107,12 @@ def run_tx40(cfg: dict, seed: int, progress=None) -> tuple[dict, dict]:
     random states of the base-parameter QR; progress : callable(stage, i, n) or None.
     Returns (result: JSON-ready dict, artefacts: arrays for the plots)."""
     import ident
-    from ident import tx40
-    from ident.filtering import decimation_fir
-    from ident.hull import chebyshev
-    from ident.interval import point_matvec
-    from ident.outliers import OutlierBudgetError
-    from ident.serial import prediction_envelope, process
+    from ident.robots import tx40
+    from ident.processing.filtering import decimation_fir
+    from ident.estimators.hull import chebyshev
+    from ident.numerics.interval import point_matvec
+    from ident.estimators.outliers import OutlierBudgetError
+    from ident.robots.serial import prediction_envelope, process
 
     _check(cfg)
     progress = progress or (lambda *a: None)
@@ -272,7 +272,7 @@ def run_tx40(cfg: dict, seed: int, progress=None) -> tuple[dict, dict]:
         "joint_shape_scale": scale,
         "min_consistent_bound_rich_friction": float(t_all_rich),
         "min_consistent_bound_per_joint_rich_friction": t_j_rich.tolist(),
-        "prior": {"lower": blo.tolist(), "upper": bhi.tolist(), "source": "ident.tx40.standard_prior mapped by B"},
+        "prior": {"lower": blo.tolist(), "upper": bhi.tolist(), "source": "ident.robots.tx40.standard_prior mapped by B"},
         "data": {"samples": int(n), "identify_samples": int(n1), "heldout_samples": int(n - n1),
                  "rows_identify": len(eq), "rows_heldout": len(eq_ho), "dt": log.dt, **{
                      k: v for k, v in eq.info.items() if isinstance(v, (int, float, bool))}},

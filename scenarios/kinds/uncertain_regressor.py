@@ -14,7 +14,7 @@ import numpy as np
 
 import ident
 import sim
-from ident.uncertain import interval_equation, regressor_distortion, uncertain_hull
+from ident.estimators.uncertain import interval_equation, regressor_distortion, uncertain_hull
 from scenarios import report
 from scenarios.experiment import estimate_hull, run_experiment
 from scenarios.rundir import save_run_files, sim_progress

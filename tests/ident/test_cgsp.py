@@ -15,9 +15,9 @@ import pytest
 from flint import fmpq, fmpq_mat
 
 import ident
-from ident.cgsp import approximate_gram_inverse, cgsp, cgsp_dense
-from ident.hull import strip_bounds
-from ident.interval import point_matvec, sub
+from ident.estimators.cgsp import approximate_gram_inverse, cgsp, cgsp_dense
+from ident.estimators.hull import strip_bounds
+from ident.numerics.interval import point_matvec, sub
 
 
 def q(x: float) -> fmpq:
@@ -95,7 +95,7 @@ def exact_pinv_hull(W, y, b, lo, hi):
 
 @pytest.mark.parametrize("seed,n,p", [(0, 10, 2), (1, 25, 3), (2, 60, 4)])
 def test_point_regressor_result_is_the_hull_of_the_pseudo_inverse_image(seed, n, p):
-    """NOTES.md: for a point regressor CGSP gives hull(W^+ [Y]) & Q (exact closed form, outer + tight)."""
+    """For a point regressor CGSP gives hull(W^+ [Y]) & Q (exact closed form, outer + tight)."""
     W, y, _, _, lo, hi, theta = small_problem(seed, n, p)
     lo = theta - 0.6  # make the prior clip some components
     hi = theta + 0.6

@@ -71,7 +71,9 @@ def test_hull_is_inside_cgsp_up_to_rounding():
 def test_box_carries_names_and_diagnostics():
     W, y, bound, prior, theta = synthetic(1, 200, 14)
     box = ident.estimate(W, y, bound, prior)
-    assert box.names == PARAMETER_NAMES
+    assert box.names == tuple(f"theta{j + 1}" for j in range(14))  # generic: a (lower, upper) prior has no names
+    h4 = ident.estimate(W, y, bound, Box(prior[0], prior[1], names=PARAMETER_NAMES))
+    assert h4.names == PARAMETER_NAMES and np.array_equal(h4.lower, box.lower)  # the names come from the prior
     for key in ("lp_iterations", "working_rows", "seconds", "at_prior", "unidentifiable", "cond"):
         assert key in box.info
     assert box.info["working_rows"] <= 200 and box.info["seconds"] > 0
@@ -152,7 +154,7 @@ def test_undetermined_parameters_are_reported_by_name(method):
     W[:, 7] = W[:, 2]  # only Imot3 + Fv2 enters the data
     W[:, 12] = 0.0  # Fs3 never excited
     y = W @ theta + np.random.default_rng(0).uniform(-1, 1, 400)
-    box = ident.estimate(W, y, 1.0, (lo, hi), method=method)
+    box = ident.estimate(W, y, 1.0, Box(lo, hi, names=PARAMETER_NAMES), method=method)
     assert np.all(np.isfinite(box.lower)) and np.all(np.isfinite(box.upper)) and box.contains(theta).all()
     assert set(box.info["unidentifiable"]) == {"Imot3", "Fv2", "Fs3"}
     assert "Fs3" in box.info["at_prior"]
@@ -187,7 +189,7 @@ INF_Y[3] = np.inf
         ({"prior": (np.zeros(3), np.full(3, np.inf))}, ValueError, r"prior must be finite"),
         ({"prior": (np.zeros(2), np.ones(2))}, ValueError, r"prior lower and upper must have shape \(3,\) to match W's columns, got \(2,\)"),
         ({"prior": np.ones(3)}, TypeError, r"prior must be a Box or a \(lower, upper\) pair of arrays of length 3, got ndarray"),
-        ({"method": "lsq"}, ValueError, r"method must be one of \('hull', 'cgsp'\), got 'lsq'"),
+        ({"method": "lsq"}, ValueError, r"method must be one of \('hull', 'cgsp'\) .*, got 'lsq'"),
         ({"method": 3}, TypeError, r"method must be a string"),
     ],
 )
@@ -213,12 +215,14 @@ def test_integer_and_fortran_ordered_input_is_accepted():
 
 
 def test_estimators_import_neither_sim_nor_mujoco():
-    """DESIGN.md: the estimators work on any (W, y) and never import the simulator (static check)."""
+    """The estimators work on any (W, y) and never import the simulator (static check; the layer rules are in
+    tests/test_architecture.py)."""
     import ast
     from pathlib import Path
 
     root = Path(ident.__file__).parent
-    for name in ("interval", "hull", "cgsp", "wls", "estimate", "lpsolver"):
+    for name in ("numerics/interval", "estimators/hull", "estimators/cgsp", "estimators/wls", "estimators/estimate",
+                 "numerics/lp"):
         tree = ast.parse((root / f"{name}.py").read_text())
         modules = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
         modules |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}

@@ -1,4 +1,4 @@
-"""Tests of ident.filtering against independent oracles.
+"""Tests of ident.processing.filtering against independent oracles.
 
 Oracles: analytic derivatives of sinusoids (Taylor remainders dt^2/6 and dt^2/12), the bilinear-transform
 Butterworth magnitude |H|^2 = 1 / (1 + (tan(pi f dt) / tan(pi fc dt))^(2N)), numpy.convolve per column, and
@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ident.filtering import (
+from ident.processing.filtering import (
     Derivatives,
     FilteredEquation,
     ProcessingSettings,

@@ -16,7 +16,7 @@ from flint import fmpq, fmpq_mat
 from scipy.optimize import linprog
 
 import ident
-from ident.hull import chebyshev, interval_hull, safe_lower_bound, strip_bounds
+from ident.estimators.hull import chebyshev, interval_hull, safe_lower_bound, strip_bounds
 from tests.conftest import bounded_noise_problem
 
 
@@ -81,7 +81,7 @@ def linprog_endpoints(W, y, b, lo, hi, coords=None):
 
 
 def verified_feasible_point(x, P):
-    """A point of S near x, checked with a rounding-error margin (independent of ident.interval).
+    """A point of S near x, checked with a rounding-error margin (independent of ident.numerics.interval).
 
     linprog's optimum may violate rows by its tolerance; move it towards the true theta (an interior point
     with margin 0.1 b) just enough to be strictly feasible, then verify in floats with a margin far above

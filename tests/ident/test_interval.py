@@ -1,4 +1,4 @@
-"""Containment properties of ident.interval, checked against exact rational arithmetic (python-flint fmpq).
+"""Containment properties of ident.numerics.interval, checked against exact rational arithmetic (python-flint fmpq).
 
 Every expected value is the exact real result of the same operation on the same floats, computed in
 rationals; the computed interval must contain it. Hypothesis draws magnitudes from subnormal to 1e100
@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from ident import interval as iv
-from ident.interval import Interval
+from ident.numerics import interval as iv
+from ident.numerics.interval import Interval
 
 FINITE = st.floats(min_value=-1e100, max_value=1e100, allow_nan=False, allow_infinity=False)
 # mixes of scales make cancellation likely (1e16 + 1 - 1e16) and exercise the dot-product error bounds

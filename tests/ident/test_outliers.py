@@ -1,8 +1,8 @@
-"""The q-relaxed hull (ident.outliers) against a brute-force oracle over row subsets.
+"""The q-relaxed hull (ident.estimators.outliers) against a brute-force oracle over row subsets.
 
 Oracle: the hull of S_q is the union, over every set R of exactly q discarded rows (discarding fewer never
 gives more), of the hulls of the remaining rows, each computed by scipy.optimize.linprog (all rows at once, no
-constraint generation, no safe bounds: independent of ident.hull). On tiny problems (m <= 13 rows, p <= 3,
+constraint generation, no safe bounds: independent of ident.estimators.hull). On tiny problems (m <= 13 rows, p <= 3,
 q <= 3: at most 286 subsets) the exact method must equal it within LP tolerance and contain it; the fast
 groups method must contain it. Certain outliers are checked against the oracle too: a certain row must miss
 the feasible set of every subset.
@@ -17,7 +17,7 @@ import pytest
 from scipy.optimize import linprog
 
 import ident
-from ident.outliers import OutlierBudgetError, detect_outliers, relaxed_hull
+from ident.estimators.outliers import OutlierBudgetError, detect_outliers, relaxed_hull
 from tests.conftest import bounded_noise_problem
 
 

@@ -1,4 +1,4 @@
-"""ident.serial against independent oracles: pinocchio's inverse dynamics (rnea) with random standard parameters,
+"""ident.robots.serial against independent oracles: pinocchio's inverse dynamics (rnea) with random standard parameters,
 hand-written friction / rotor / offset / coupled-wrist formulas, numpy's SVD rank, scipy's FIR filtering."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 
 pin = pytest.importorskip("pinocchio")
 
-from ident import tx40
-from ident.serial import SerialRobot, base_parameters, process, rich_friction_columns
+from ident.robots import tx40
+from ident.robots.serial import SerialRobot, base_parameters, process, rich_friction_columns
 
 THREE_LINK_URDF = """<?xml version="1.0"?>
 <robot name="three">
@@ -171,9 +171,9 @@ def test_box_from_standard_encloses_random_images(tx40_robot):
 
 
 def test_process_matches_scipy_filtering(tx40_robot):
-    """The 6-joint processing (groups of 4 joints through ident.filtering) against filtering each joint's
+    """The 6-joint processing (groups of 4 joints through ident.processing.filtering) against filtering each joint's
     column directly with numpy.convolve, and the bound against ||h||_1 times the raw bound."""
-    from ident.filtering import decimation_fir
+    from ident.processing.filtering import decimation_fir
 
     log = tx40.load_log()
     base = tx40_robot.base()
@@ -191,7 +191,7 @@ def test_process_matches_scipy_filtering(tx40_robot):
         assert np.allclose(eq.W[rows, 3], col[: rows.size], rtol=0, atol=1e-9 * (np.max(np.abs(col)) + 1))
     assert abs(eq.gain - np.abs(taps).sum()) < 1e-12
     assert np.all(eq.window[:, 1] - eq.window[:, 0] == L - 1)
-    # the derivatives are those of ident.filtering on the same joints
+    # the derivatives are those of ident.processing.filtering on the same joints
     b = eq.bound(np.arange(1.0, 7.0))
     assert np.all(b >= np.arange(1.0, 7.0)[eq.joint] * np.abs(taps).sum())
 
@@ -227,8 +227,8 @@ def test_prediction_envelope_against_linprog():
     """Endpoints enclose scipy's LP optimum (outer) and are tight to 1e-7 relative; inside the box evaluation."""
     from scipy.optimize import linprog
 
-    from ident.interval import point_matvec
-    from ident.serial import prediction_envelope
+    from ident.numerics.interval import point_matvec
+    from ident.robots.serial import prediction_envelope
 
     rng = np.random.default_rng(8)
     m, p = 300, 7

@@ -9,7 +9,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from ident import tx40
+from ident.robots import tx40
 
 pytest.importorskip("pinocchio")
 
@@ -77,8 +77,8 @@ def test_least_squares_fit_agrees_with_figaroh():
     """Same processed states and torques: FIGAROH's regressor (its coupling parametrisation) and ours span the
     same columns, so the least-squares torque fits agree, and so do the parameters both parametrise alike."""
     pytest.importorskip("figaroh")
-    from ident.filtering import derivatives
-    from ident.serial import _by_fours
+    from ident.processing.filtering import derivatives
+    from ident.robots.serial import _by_fours
 
     robot = tx40.robot()
     base = robot.base()

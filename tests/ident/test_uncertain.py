@@ -1,4 +1,4 @@
-"""The interval regressor (ident.uncertain) against independent oracles.
+"""The interval regressor (ident.estimators.uncertain) against independent oracles.
 
 * Oettli-Prager hull vs vertex enumeration: the feasible set of every vertex matrix of [W] (all 2^(m p) of them
   on tiny problems, a random sample plus the all-lower / all-upper ones on larger ones) is a point-regressor
@@ -23,8 +23,8 @@ import scipy.signal
 from scipy.optimize import linprog
 
 import ident
-from ident.filtering import ProcessingSettings, default_edge_samples, parallel_filter
-from ident.uncertain import (
+from ident.processing.filtering import ProcessingSettings, default_edge_samples, parallel_filter
+from ident.estimators.uncertain import (
     Distortion,
     encoder_radii,
     filter_interval,
@@ -267,7 +267,7 @@ def test_interval_equation_encloses_a_noise_free_recording(geometry, exact_recor
     def fn(q, qd, qdd):
         return ident.regressor(geometry, q, qd, qdd)
 
-    from ident.uncertain import regressor_distortion
+    from ident.estimators.uncertain import regressor_distortion
 
     dist = regressor_distortion(fn, rec["q"], rec["qd"], rec["qdd"], settings)
     ieq = interval_equation(fn, rec["q"], rec["tau"], 1e-3, settings, counts_per_turn=None,

@@ -35,7 +35,8 @@ def test_wls_matches_lstsq_on_the_independently_weighted_system():
     np.testing.assert_allclose(res.theta, th, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(res.std, std, rtol=1e-8)
     np.testing.assert_allclose(res.rel_std_percent, 100 * std / np.abs(th), rtol=1e-8)
-    assert res.names == PARAMETER_NAMES and res.dof == W.shape[0] - 14
+    assert res.names == tuple(f"theta{j + 1}" for j in range(14)) and res.dof == W.shape[0] - 14  # generic names
+    assert ident.wls(W, y, joints=4, names=PARAMETER_NAMES).names == PARAMETER_NAMES
     # statistical sanity: the per-joint sigmas recover the simulated noise levels
     np.testing.assert_allclose(res.joint_sigma, (0.1, 0.5, 1.0, 2.0), rtol=0.1)
 
@@ -76,7 +77,7 @@ def test_rank_deficient_regressor_names_the_undetermined_parameters():
     W[:, 7] = W[:, 2]  # Fv2 and Imot3 enter the data only through their sum
     W[:, 12] = 0.0  # Fs3 never excited
     with pytest.raises(ident.UnidentifiableError) as err:
-        ident.wls(W, y)
+        ident.wls(W, y, names=PARAMETER_NAMES)
     assert set(err.value.names) == {"Imot3", "Fv2", "Fs3"}
     assert "Fs3" in str(err.value) and isinstance(err.value, ValueError)
 
@@ -85,7 +86,7 @@ def test_ill_conditioned_parameters_are_flagged_not_nan():
     W, y, _ = stacked_problem(n_samples=200)
     rng = np.random.default_rng(1)
     W[:, 5] = W[:, 4] + 1e-11 * rng.standard_normal(W.shape[0])  # numerically almost collinear
-    res = ident.wls(W, y)
+    res = ident.wls(W, y, names=PARAMETER_NAMES)
     assert np.all(np.isfinite(res.theta)) and np.all(np.isfinite(res.std))
     assert set(res.poorly_identified) == {"Mnac", "Ibc"}
 

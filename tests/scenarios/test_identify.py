@@ -2,7 +2,7 @@
 a table that fits 80 columns, per-parameter priors and per-joint bounds, one JSON document on stdout.
 
 Oracles: Python's own ``float()`` on the CSV text (reader), the whole-record processing rebuilt here from
-:mod:`ident.filtering` and :func:`ident.regressor.regressor` (blocks), the propagated bound ``|h| * b`` computed
+:mod:`ident.processing.filtering` and :func:`ident.robots.h4.regressor` (blocks), the propagated bound ``|h| * b`` computed
 from the taps (per-joint bounds), the simulator's true parameters (enclosure), ``json.loads`` (stdout).
 """
 
@@ -21,9 +21,9 @@ from typer.testing import CliRunner
 
 import ident
 import sim
-from ident.filtering import ProcessingSettings, derivatives, exclude_low_speed, parallel_filter
-from ident.processing import build_equation
-from ident.regressor import regressor
+from ident.processing.filtering import ProcessingSettings, derivatives, exclude_low_speed, parallel_filter
+from ident.processing.processing import build_equation
+from ident.robots.h4 import regressor
 from scenarios.cli import _print_summary, app
 from scenarios.spec import DEFAULTS
 
@@ -141,7 +141,7 @@ def test_reader_header_errors(tmp_path):
 
 
 def _whole_record(geometry, ds, row_bound, settings, t_abs):
-    """The paper's processing on the whole record, straight from ident.filtering (the reference)."""
+    """The paper's processing on the whole record, straight from ident.processing.filtering (the reference)."""
     est = derivatives(ds.q, ds.dt, settings.position_cutoff_hz, settings.butter_order, timing=settings.torque_timing)
     v = est.valid
     samples = np.arange(len(ds))[v]

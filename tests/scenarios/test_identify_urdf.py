@@ -1,7 +1,7 @@
 """``h4bench identify --urdf``: any serial robot's log, here the real TX40's (data/tx40), and the physical prior.
 
 Oracles: the TX40 prior's former formulas, written out here (``_tx40_prior_formulas``: the TX40 numbers of
-ident.tx40 and the URDF limits); for the command, the same box computed directly from :func:`ident.serial.process`
+ident.robots.tx40 and the URDF limits); for the command, the same box computed directly from :func:`ident.robots.serial.process`
 and :func:`ident.estimate` with the documented settings (``URDF_PROCESSING``, default mass and reach);
 ``json.loads`` of stdout; exit codes 2 (bad option or data) and 3 (proven inconsistent).
 """
@@ -15,8 +15,8 @@ import pytest
 from typer.testing import CliRunner
 
 import ident
-from ident import tx40
-from ident.serial import SerialRobot, default_reach, parameter_joint, physical_prior, process
+from ident.robots import tx40
+from ident.robots.serial import SerialRobot, default_reach, parameter_joint, physical_prior, process
 from scenarios.cli import app
 from scenarios.identify import URDF_PROCESSING
 
@@ -25,7 +25,7 @@ SAMPLES = 10_000  # 2 s of the 5 kHz log: about 90 processed rows per joint at d
 
 
 def _tx40_prior_formulas(robot):
-    """ident.tx40.standard_prior as it was written before physical_prior existed (the reference)."""
+    """ident.robots.tx40.standard_prior as it was written before physical_prior existed (the reference)."""
     p = robot.n_parameters
     lo, hi = np.zeros(p), np.zeros(p)
     M, r = tx40.ARM_MASS, tx40.REACH
@@ -88,7 +88,7 @@ def _header(n):
 
 @pytest.fixture(scope="module")
 def log_csv(tmp_path_factory):
-    """The first SAMPLES of the TX40 log on the joint side (ident.tx40.load_log's conversion), with an extra
+    """The first SAMPLES of the TX40 log on the joint side (ident.robots.tx40.load_log's conversion), with an extra
     column the reader must ignore."""
     log = tx40.load_log()
     q, tau, t = log.q[:SAMPLES], log.tau[:SAMPLES], log.t[:SAMPLES]
@@ -223,8 +223,8 @@ def test_h4_path_refuses_urdf_options(log_csv, tmp_path):
 
 
 def test_urdf_coupled_wrist(log_csv, tmp_path):
-    """--coupled-wrist 5,6 (1-based) is the TX40's wrist (ident.tx40.COUPLING, 0-based (4, 5)): the same base
-    parameters as ident.tx40.robot()'s."""
+    """--coupled-wrist 5,6 (1-based) is the TX40's wrist (ident.robots.tx40.COUPLING, 0-based (4, 5)): the same base
+    parameters as ident.robots.tx40.robot()'s."""
     res = _run(log_csv[0], "--urdf", URDF, "--bound", "50", "--coupled-wrist", "5,6", "--json",
                "--out", tmp_path / "run")
     assert res.exit_code == 0, res.stderr

@@ -62,8 +62,8 @@ def test_the_wheel_holds_the_models(installed):
 
 def test_an_installed_wheel_runs_the_paper_scenario_from_anywhere(installed, tmp_path):
     python, purelib, _ = installed
-    where = subprocess.run([str(python), "-c", "import sim, scenarios, ident.tx40; print(sim.__file__); "
-                            "print(sim.DEFAULT_MODEL_PATH); print(ident.tx40.DATA_DIR)"],
+    where = subprocess.run([str(python), "-c", "import sim, scenarios, ident.robots.tx40; print(sim.__file__); "
+                            "print(sim.DEFAULT_MODEL_PATH); print(ident.robots.tx40.DATA_DIR)"],
                            capture_output=True, text=True, cwd=tmp_path, check=True, env=CLEAN_ENV)
     sim_file, model_path, data_dir = where.stdout.split()
     assert all(Path(p).is_relative_to(purelib) for p in (sim_file, model_path, data_dir)), where.stdout

@@ -317,7 +317,7 @@ def test_what_survives_the_identification_filters(geometry):
     torques. White noise is averaged away; the drive mix is structured and keeps most of its bound."""
     import ident
     import trajectories
-    from ident.filtering import default_edge_samples, lowpass_position, parallel_filter
+    from ident.processing.filtering import default_edge_samples, lowpass_position, parallel_filter
 
     ref = trajectories.fourier_excitation(geometry, duration=10.0, seed=0, optimise=False)
     tau = ident.inverse_dynamics(geometry, ident.NOMINAL_PARAMETERS, ref.q, ref.qd, ref.qdd)

@@ -205,7 +205,7 @@ def test_held_torque_matches_the_mid_step_regressor(geometry, experiment):
     parallel filter about 5 times better than at the sample instants, whose acceleration is half a step late
     (measured 0.005 vs 0.023 N m on this gentle 3 s motion, |qdd| <= 54 rad/s^2; the paper scenario's motion
     makes the late acceleration cost over 0.25 N m)."""
-    from ident.filtering import decimation_fir, derivatives
+    from ident.processing.filtering import decimation_fir, derivatives
 
     _, data, truth = experiment
     h = decimation_fir(10, 41, 0.2)

@@ -14,7 +14,7 @@ import ident
 import sim
 import trajectories as tj
 import trajectories.excitation as tx
-from ident.filtering import ProcessingSettings
+from ident.processing.filtering import ProcessingSettings
 from tests.conftest import bounded_noise_problem
 from trajectories.bounded import HalfwidthProblem, halfwidths, smooth_max
 

@@ -27,7 +27,7 @@ set of at most q discarded rows), generally non-convex. Two rigorous outer enclo
   an elastic variable ``s`` that widens every strip by ``s w_k`` at a penalty ``Lambda s`` in the objective,
   so the LP is always feasible and an empty node gets a large bound) is solved by HiGHS (dual simplex, warm
   started from the previous node) and bounded below by the Neumaier-Shcherbina safe bound
-  (:func:`ident.hull.safe_lower_bound` on the exact float data, valid for any dual vector). The open node of
+  (:func:`ident.estimators.hull.safe_lower_bound` on the exact float data, valid for any dual vector). The open node of
   smallest bound is expanded next; a node is closed when its LP point violates at most ``q - |E|`` free rows
   (a point of ``S_q`` up to the LP tolerance: its value is the incumbent) or when its bound reaches the
   incumbent (within ``tau``, 1e-7 of the box width); otherwise it branches on its most violated free row
@@ -41,7 +41,7 @@ set of at most q discarded rows), generally non-convex. Two rigorous outer enclo
   true number of outliers (each spare unit lets any active row of a vertex be dropped).
 
 What is rigorous, and where. The row bounds ``y -+ b`` are rounded outward; the ranges of ``W_k theta``
-over a box come from :func:`ident.interval.point_matvec`; every LP bound is a safe dual bound; "certain"
+over a box come from :func:`ident.numerics.interval.point_matvec`; every LP bound is a safe dual bound; "certain"
 outliers are decided by interval evaluation. Heuristic (float) decisions only steer the search (which row
 to branch on, when a node's point counts as a member of ``S_q``, which rows are "suspected"), never a bound:
 a wrong incumbent only makes the search explore further or stop at a bound that is still valid.
@@ -63,37 +63,19 @@ from dataclasses import dataclass
 import highspy
 import numpy as np
 
-from ident.estimate import (
-    InconsistentDataError,
-    _check_bound,
-    _check_prior,
-    _check_W_y,
-    estimate,
-    min_consistent_bound,
-)
-from ident.hull import _column_scale, power2_scale, safe_lower_bound, strip_bounds
-from ident.lpsolver import check, new_highs
-from ident.interval import point_matvec, up
-from ident.parameters import Box
+from ident.box import Box
+from ident.errors import InconsistentDataError, OutlierBudgetError
+from ident.estimators.checks import check_bound, check_prior, check_W_y
+from ident.estimators.estimate import estimate, min_consistent_bound
+from ident.estimators.hull import _column_scale, power2_scale, safe_lower_bound, strip_bounds
+from ident.numerics.interval import point_matvec, up
+from ident.numerics.lp import check, new_highs
 
 __all__ = ["OutlierBudgetError", "OutlierRows", "detect_outliers", "relaxed_hull"]
 
 METHODS = ("auto", "exact", "groups")
 _OPTIMAL = highspy.HighsModelStatus.kOptimal
 
-
-class OutlierBudgetError(InconsistentDataError):
-    """More than ``q`` rows contradict the bound: the q-relaxed set ``S_q`` is proven empty.
-
-    ``q`` is the budget given; ``certain_rows`` the rows proven to be outliers when the proof was found;
-    ``min_bound`` is the plain smallest consistent scalar bound (all rows kept), an upper bound of the
-    smallest bound that would make the q-relaxed problem consistent.
-    """
-
-    def __init__(self, message: str, *, q: int, certain_rows=(), min_bound: float, bound: float) -> None:
-        super().__init__(message, min_bound=min_bound, bound=bound, scale_lower=1.0)
-        self.q = int(q)
-        self.certain_rows = tuple(int(k) for k in certain_rows)
 
 
 @dataclass(frozen=True)
@@ -148,9 +130,9 @@ def detect_outliers(W, y, bound, box) -> OutlierRows:
     box of :func:`relaxed_hull`. If ``box`` encloses ``S_q``, every certain row is an outlier of every
     parameter vector consistent with all but q rows (rigorous: outward-rounded strips and interval ranges).
     """
-    W, y = _check_W_y(W, y)
-    b, _ = _check_bound(bound, W.shape[0])
-    lo, hi, _ = _check_prior(box, W.shape[1])
+    W, y = check_W_y(W, y)
+    b, _ = check_bound(bound, W.shape[0])
+    lo, hi, _ = check_prior(box, W.shape[1])
     return _detect(W, *strip_bounds(y, b), lo, hi)
 
 
@@ -488,10 +470,10 @@ def relaxed_hull(W, y, bound, prior, q: int, *, method: str = "auto", groups=Non
     ``ValueError``/``TypeError`` naming the argument on bad input.
     """
     t0 = time.perf_counter()
-    W, y = _check_W_y(W, y)
+    W, y = check_W_y(W, y)
     m, p = W.shape
-    b, scalar = _check_bound(bound, m)
-    lo, hi, names = _check_prior(prior, p)
+    b, scalar = check_bound(bound, m)
+    lo, hi, names = check_prior(prior, p)
     q = _check_q(q, m)
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")

@@ -24,6 +24,8 @@ import threading
 import highspy
 import numpy as np
 
+from ident.errors import LPError, LPFallbackWarning
+
 __all__ = ["LARGE_ENTRY", "LPError", "LPFallbackWarning", "add_dense_rows", "check", "new_highs"]
 
 LARGE_ENTRY = 1e15  # HiGHS's default large_matrix_value: addRows rejects a block holding an entry this large
@@ -32,12 +34,6 @@ _lock = threading.Lock()
 _first_done = False
 
 
-class LPError(RuntimeError):
-    """HiGHS rejected a call or could not solve a linear program (the message names the call and status)."""
-
-
-class LPFallbackWarning(RuntimeWarning):
-    """An LP could not be solved; a coarser rigorous bound (or the prior) was used for some endpoints."""
 
 
 def check(status, what: str) -> None:

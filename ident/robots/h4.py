@@ -8,7 +8,7 @@ sample k, joint i -> row ``4 k + i``.
 
 sign(0): numpy's convention, ``sign(0) = 0``. A joint at rest contributes no Coulomb column; its torque then
 depends on the unmodelled static friction, so samples with small |qd| should be excluded (see
-``ident.filtering``) or handled with an interval regressor ([-1, 1]).
+``ident.processing.filtering``) or handled with an interval regressor ([-1, 1]).
 
 Model structures (``structure=``):
 - ``"paper"`` (default): the 14 columns above.
@@ -24,7 +24,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident.parameters import PARAMETER_NAMES, PARAMETER_UNITS
+# The 14 base parameters of the H4 inverse dynamic model (paper eq. 18); the order is defined here once,
+# every other module refers to PARAMETER_NAMES.
+PARAMETER_NAMES: tuple[str, ...] = (
+    "Imot1", "Imot2", "Imot3", "Imot4",  # motor + arm + lumped forearm inertia about the motor axis [kg m^2]
+    "Mnac",  # nacelle mass [kg]
+    "Ibc",  # nacelle inertia about the vertical axis through D [kg m^2]
+    "Fv1", "Fv2", "Fv3", "Fv4",  # viscous friction [N m s/rad]
+    "Fs1", "Fs2", "Fs3", "Fs4",  # Coulomb friction [N m]
+)
+PARAMETER_UNITS: tuple[str, ...] = ("kg m^2",) * 4 + ("kg", "kg m^2") + ("N m s/rad",) * 4 + ("N m",) * 4
+N_PARAMETERS = len(PARAMETER_NAMES)
+
+# What a designer knows before identification: the paper's a priori values (Table 1: Imot 0.012 kg m^2,
+# Mnac 1.0 kg; Ibc taken as 0.003 kg m^2, Table 2's order, since the a priori 0.0008 ignores the lateral bars)
+# and frictions of the order of its Table 2. Used for control, feed-forward and trajectory checks; never
+# as a truth.
+NOMINAL_PARAMETERS: tuple[float, ...] = (0.012, 0.012, 0.012, 0.012, 1.0, 0.003,
+                                         0.16, 0.06, 0.09, 0.09, 1.15, 1.10, 0.72, 0.99)
 
 EXTRA_NAMES: tuple[str, ...] = ("MXa1", "MXa2", "MXa3", "MXa4", "mf1", "mf2", "mf3", "mf4")
 STRUCTURES = ("paper", "extended")

@@ -11,7 +11,7 @@ holding the rows that endpoint needed so far (its working set) and that model's 
    larger set);
 3. the other endpoints get their violated new rows added to their own model and are re-solved from their
    previous optimal basis (dual simplex: few iterations); their new points are checked against all rows seen
-   so far (constraint generation, as :func:`ident.hull.interval_hull`), the worst violated rows are added and
+   so far (constraint generation, as :func:`ident.estimators.hull.interval_hull`), the worst violated rows are added and
    the LPs re-solved until no row is violated by more than ``violation_tol`` times its half-width.
 
 Every endpoint returned is a Neumaier-Shcherbina safe bound of its model's LP (rows outward rounded, duals
@@ -23,14 +23,14 @@ was optimal for that objective; the working sets are a few hundred rows, so memo
 
 When a model becomes infeasible, or the safe bounds of two endpoints cross (``lower_i > upper_i``, itself a
 proof that the rows seen are inconsistent), the verdict is the batch estimator's: a Chebyshev LP over all rows
-seen decides (:func:`ident.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
+seen decides (:func:`ident.estimators.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
 is raised and **the rejected block is dropped**: the object is left exactly as before the update (rows seen,
 box, working sets; the HiGHS models that had taken rows of the block are rebuilt from their working sets), so
 later consistent blocks can still be added. If it is not proven (the set is thinner than the LP tolerance),
 the box of the batch :func:`ident.estimate` on all rows seen is returned (it encloses a slightly inflated set)
 and ``info['fallback'] = 'batch'``.
 
-Scaling (as :func:`ident.hull.interval_hull`): each model sees ``(theta - c_j) / d`` with ``c_j`` the
+Scaling (as :func:`ident.estimators.hull.interval_hull`): each model sees ``(theta - c_j) / d`` with ``c_j`` the
 midpoint of the box when the model is made (the shift keeps the row bounds of the size of the strips,
 however narrow), rows scaled by the power of two nearest the inverse of their half-width, and the column
 scale ``d`` of the first block after that row scaling; each model's cost is ``+-1`` on its scaled column (the
@@ -47,10 +47,12 @@ import time
 import highspy
 import numpy as np
 
-from ident.estimate import InconsistentDataError, _check_finite, _check_prior, _real_array, estimate
-from ident.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
-from ident.lpsolver import LPError, add_dense_rows, check
-from ident.parameters import Box
+from ident.errors import InconsistentDataError
+from ident.estimators.checks import check_finite, check_prior, real_array
+from ident.estimators.estimate import estimate
+from ident.estimators.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
+from ident.numerics.lp import LPError, add_dense_rows, check
+from ident.box import Box
 
 __all__ = ["OnlineHull"]
 
@@ -81,7 +83,7 @@ class OnlineHull:
         if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1:
             raise ValueError(f"p must be an integer >= 1 (number of parameters), got {p!r}")
         self.p = int(p)
-        self._lo, self._hi, self.names = _check_prior(prior, self.p)
+        self._lo, self._hi, self.names = check_prior(prior, self.p)
         for name, val in (("lp_tol", lp_tol), ("violation_tol", violation_tol)):
             if isinstance(val, bool) or not isinstance(val, (int, float)) or not (np.isfinite(val) and val > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {val!r}")
@@ -180,21 +182,21 @@ class OnlineHull:
         Raises :class:`~ident.InconsistentDataError` when the rows seen so far are proven inconsistent.
         """
         t0 = time.perf_counter()
-        W = _real_array(W_rows, "W_rows")
+        W = real_array(W_rows, "W_rows")
         if W.ndim == 1 and W.size == self.p:
             W = W[None, :]
         if W.ndim != 2 or W.shape[1] != self.p:
             raise ValueError(f"W_rows must have shape (k, {self.p}), got {W.shape}")
         k = W.shape[0]
-        y = np.atleast_1d(_real_array(y_rows, "y_rows"))
+        y = np.atleast_1d(real_array(y_rows, "y_rows"))
         if y.shape != (k,):
             raise ValueError(f"y_rows must have shape ({k},) to match W_rows, got {y.shape}")
-        b = _real_array(bound_rows, "bound_rows")
+        b = real_array(bound_rows, "bound_rows")
         b = np.full(k, float(b)) if b.ndim == 0 else b
         if b.shape != (k,):
             raise ValueError(f"bound_rows must be a scalar or have shape ({k},), got {b.shape}")
-        _check_finite(W, "W_rows")
-        _check_finite(y, "y_rows")
+        check_finite(W, "W_rows")
+        check_finite(y, "y_rows")
         if not np.all(np.isfinite(b) & (b > 0)):
             raise ValueError("bound_rows must be finite and > 0 in every row")
         if k == 0:

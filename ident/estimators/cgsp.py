@@ -35,8 +35,8 @@ The paper's last two steps, ``[b] <- A0 [b'] & [b]`` and ``[A] <- A0 [A'] & [A]`
 [b] are not contracted by CGS here (only X is), so they can only change through the inexactness of
 ``A0 C ~ I``, which would be a rounding artefact rather than a sound contraction.
 
-NOTES.md: for a point regressor the result is ``hull(W^+ [Y]) & Q`` up to rounding, whatever N is: the
-width does not shrink like that of the exact hull of ``S`` (:mod:`ident.hull`).
+A checked property (``tests/ident/test_cgsp.py``): for a point regressor the result is ``hull(W^+ [Y]) & Q`` up to rounding, whatever N is: the
+width does not shrink like that of the exact hull of ``S`` (:mod:`ident.estimators.hull`).
 
 :func:`cgsp_dense` is the small dense reference (forms A, inverts mid(A) numerically, Gauss-Seidel over all
 N + p variables with endpoint interval products) used by the tests.
@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.interval import (
+from ident.numerics.interval import (
     div,
     dot_error,
     dot_rows,

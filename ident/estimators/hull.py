@@ -25,7 +25,7 @@ that model only by powers of two, so the box is the same in any units (to the LP
 rounding of the converted data; ``tests/ident/test_units.py`` states the tolerance), and the shift keeps
 row bounds of the size of the strips however narrow they are (bounds of 1e-13 relative). HiGHS would
 otherwise drop entries below 1e-9 and reject blocks with entries of 1e15 (every HiGHS status is checked,
-:mod:`ident.lpsolver`). The safe bounds are evaluated on the original data with the duals mapped back
+:mod:`ident.numerics.lp`). The safe bounds are evaluated on the original data with the duals mapped back
 (``y_k = d_i r_k y'_k``), around ``theta0`` (:func:`shifted_safe_bound`), so neither the scaling nor the
 shift can affect rigour. An LP HiGHS cannot solve keeps its endpoint at a coarser safe bound or the prior.
 
@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 import highspy
 import numpy as np
 
-from ident.interval import down, mid_rad, mul, point_matmul, sub, sum_down, up
-from ident.lpsolver import LPError, add_dense_rows, check, new_highs
+from ident.numerics.interval import down, mid_rad, mul, point_matmul, sub, sum_down, up
+from ident.numerics.lp import LPError, add_dense_rows, check, new_highs
 
 __all__ = [
     "ChebyshevResult",
@@ -493,7 +493,7 @@ def chebyshev(
     ``W_k theta - w_k s <= y_k``. HiGHS sees them shifted to ``center`` (default the prior's midpoint) and
     scaled as in :func:`interval_hull` (rows by ``1 / w``, then columns, powers of two); the safe bound is
     evaluated on the exact data around ``center``. The first working set is the rows of largest scaled
-    residual at ``center`` plus spread rows. Raises :class:`~ident.lpsolver.LPError` when HiGHS cannot solve
+    residual at ``center`` plus spread rows. Raises :class:`~ident.numerics.lp.LPError` when HiGHS cannot solve
     the LP or rejects the model (no bound is then known beyond the residual at ``center``).
     """
     t0 = time.perf_counter()

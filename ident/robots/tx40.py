@@ -1,5 +1,5 @@
 """The Staubli TX40 log shipped in ``data/tx40/`` (real robot, FIGAROH example data): loading and conversion
-from the motor side to the joint side, and the robot's regressor (:class:`ident.serial.SerialRobot`).
+from the motor side to the joint side, and the robot's regressor (:class:`ident.robots.serial.SerialRobot`).
 
 See ``data/tx40/README.md`` for origin, licence and file contents. Conversion (the FIGAROH example's, with
 its reduction ratios and coupled wrist): ``R = diag(32, 32, 45, -48, 45, 32)`` with ``R[5, 4] = 32`` maps
@@ -22,7 +22,7 @@ __all__ = ["A_PRIORI", "DATA_DIR", "DT", "N_JOINTS", "RATIOS", "TX40Log", "load_
 
 def _data_dir() -> Path:
     """``data/tx40`` of a source checkout, else the installed package data (``h4bench_data``, the same files)."""
-    checkout = Path(__file__).resolve().parent.parent / "data" / "tx40"
+    checkout = Path(__file__).resolve().parents[2] / "data" / "tx40"
     if checkout.is_dir():
         return checkout
     import importlib.util
@@ -39,7 +39,7 @@ DT = 2e-4  # s: TX40_config.yaml ts, 5 kHz
 RATIOS = (32.0, 32.0, 45.0, -48.0, 45.0, 32.0)  # motor / joint, TX40_config.yaml reduction_ratio
 COUPLING = (4, 5)  # 0-based: the motor of joint 6 also turns with joint 5 (R[5, 4] = ratio of joint 6)
 OFFSETS = (0.0, -np.pi / 2, np.pi / 2, 0.0, 0.0, 0.0)  # rad, added after the conversion (URDF zero)
-# The example's a-priori values (TX40_config.yaml), joint side, in the units of ident.serial
+# The example's a-priori values (TX40_config.yaml), joint side, in the units of ident.robots.serial
 A_PRIORI = {
     "fv": (8.05, 5.53, 1.97, 1.11, 1.86, 0.65),
     "fs": (7.14, 8.26, 6.34, 2.48, 3.03, 0.282),
@@ -125,9 +125,9 @@ def urdf_path() -> Path:
 
 
 def robot(**options):
-    """The TX40's :class:`ident.serial.SerialRobot` (friction, rotor inertia, offsets, coupled wrist (4, 5));
+    """The TX40's :class:`ident.robots.serial.SerialRobot` (friction, rotor inertia, offsets, coupled wrist (4, 5));
     ``options`` override the keyword arguments of SerialRobot."""
-    from ident.serial import SerialRobot
+    from ident.robots.serial import SerialRobot
 
     kw = {"coupled_wrist": COUPLING, **options}
     return SerialRobot(urdf_path(), **kw)
@@ -151,16 +151,16 @@ def standard_prior(robot) -> tuple[np.ndarray, np.ndarray]:
     times the example's a-priori rotor of joint 1) and ``r_i`` the reduction ratio, offset ``|off_i| <= 0.2
     E_i`` (a larger current-sensor offset would be a drive fault). Coupled wrist: ``Iam <= J 32^2``, ``fvm <=
     E_6 / V_6``, ``fsm <= E_6``. Wide on purpose: it only excludes the unphysical. This is
-    :func:`ident.serial.physical_prior` with M, r, J, the ratios and the offset fraction 0.2 above.
+    :func:`ident.robots.serial.physical_prior` with M, r, J, the ratios and the offset fraction 0.2 above.
     """
-    from ident.serial import physical_prior
+    from ident.robots.serial import physical_prior
 
     return physical_prior(robot, ARM_MASS, REACH, rotor_inertia_max=MOTOR_INERTIA_MAX, ratios=RATIOS,
                           offset_fraction=0.2)
 
 
 def rich_friction_prior(robot) -> tuple[np.ndarray, np.ndarray]:
-    """Prior of the richer friction law's columns (:func:`ident.serial.rich_friction_columns`), per joint:
+    """Prior of the richer friction law's columns (:func:`ident.robots.serial.rich_friction_columns`), per joint:
     ``|fva_i| <= E_i / V_i``, ``|fst_i| <= E_i``, ``|fvq_i| <= E_i / V_i^2`` (same reasoning as
     :func:`standard_prior`). Returns (lower (3 nj,), upper (3 nj,)) in the order fva, fst, fvq."""
     effort = np.asarray(robot.model.effortLimit, dtype=float)

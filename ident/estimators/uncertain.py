@@ -11,7 +11,7 @@ this interval meets ``[y_k - b_k, y_k + b_k]``:
 
     S = {theta in Q : (Wc - D) theta <= y + b  and  (Wc + D) theta >= y - b},
 
-a polytope given by 2N linear inequalities. Its exact hull is the 2p LPs of :func:`ident.hull.interval_hull`
+a polytope given by 2N linear inequalities. Its exact hull is the 2p LPs of :func:`ident.estimators.hull.interval_hull`
 on the stacked rows ``A = [W_lo; W_hi]`` with ``W_lo = down(Wc - D)``, ``W_hi = up(Wc + D)`` (outward rounded,
 so ``[W_lo, W_hi]`` contains ``[W]`` and the set can only grow). Each stacked row has one finite side; the other
 side is set to the range of that row over the prior box, computed by interval arithmetic and rounded outward
@@ -22,7 +22,7 @@ with ``L_k > y_k + b_k`` (or ``U_k < y_k - b_k``) proves S empty. Endpoints are 
 emptiness is decided by a one-sided Chebyshev LP (``min s : W_lo theta - s b <= y, W_hi theta + s b >= y``):
 a safe lower bound of ``s* > 1`` proves S empty, a verified point with ``s <= 1`` proves it non-empty.
 
-**Where [W] comes from (the H4 chain of :mod:`ident.processing`).** The estimated states
+**Where [W] comes from (the H4 chain of :mod:`ident.processing.processing`).** The estimated states
 ``s_est = P(q_meas)`` (Butterworth filtfilt + central differences, a linear operator P) differ from the true
 ones by ``P(e) + (P(q) - s_true)``: the encoder error ``e`` (``|e| <= pi / counts``, rounding to the nearest
 count) and the filter's distortion of the true motion. After the parallel filter h (applied to both sides):
@@ -71,15 +71,10 @@ import highspy
 import numpy as np
 import scipy.signal
 
-from ident.estimate import (
-    InconsistentDataError,
-    _check_bound,
-    _check_finite,
-    _check_prior,
-    _least_squares_center,
-    _real_array,
-)
-from ident.filtering import (
+from ident.errors import InconsistentDataError
+from ident.estimators.checks import check_bound, check_finite, check_prior, real_array
+from ident.estimators.estimate import least_squares_center
+from ident.processing.filtering import (
     ProcessingSettings,
     central_difference,
     default_edge_samples,
@@ -88,10 +83,10 @@ from ident.filtering import (
     parallel_filter,
     second_difference,
 )
-from ident.hull import _column_scale, _new_highs, interval_hull, power2_scale, shifted_safe_bound, strip_bounds
-from ident.interval import down, nonneg_upper, point_matmul, point_matvec, up
-from ident.lpsolver import LPError, LPFallbackWarning, add_dense_rows, check
-from ident.parameters import Box
+from ident.estimators.hull import _column_scale, _new_highs, interval_hull, power2_scale, shifted_safe_bound, strip_bounds
+from ident.numerics.interval import down, nonneg_upper, point_matmul, point_matvec, up
+from ident.numerics.lp import LPError, LPFallbackWarning, add_dense_rows, check
+from ident.box import Box
 
 __all__ = [
     "Distortion",
@@ -110,36 +105,36 @@ N_JOINTS = 4
 
 # ----------------------------------------------------------------------------------------------- checks
 def _check_interval_matrix(Wc, D, y) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    Wc = _real_array(Wc, "Wc")
+    Wc = real_array(Wc, "Wc")
     if Wc.ndim != 2 or Wc.shape[1] < 1 or Wc.shape[0] < 1:
         raise ValueError(f"Wc must have shape (m, p) with m, p >= 1, got {Wc.shape}")
-    _check_finite(Wc, "Wc")
-    D = _real_array(D, "D")
+    check_finite(Wc, "Wc")
+    D = real_array(D, "D")
     if D.ndim == 0:
         D = np.full(Wc.shape, float(D))
     if D.shape != Wc.shape:
         raise ValueError(f"D must be a scalar or have the shape of Wc {Wc.shape}, got {D.shape}")
-    _check_finite(D, "D")
+    check_finite(D, "D")
     if np.any(D < 0):
         k = tuple(int(i) for i in np.unravel_index(int(np.argmin(D)), D.shape))
         raise ValueError(f"D must be >= 0 (a radius), got {float(D[k])!r} at index {k}")
-    y = _real_array(y, "y")
+    y = real_array(y, "y")
     if y.shape != (Wc.shape[0],):
         raise ValueError(f"y must have shape (m,) = ({Wc.shape[0]},) to match Wc, got {y.shape}")
-    _check_finite(y, "y")
+    check_finite(y, "y")
     return Wc, D, y
 
 
 def _states(x, name: str, n: int | None = None) -> np.ndarray:
-    a = _real_array(x, name)
+    a = real_array(x, name)
     if a.ndim != 2 or a.shape[1] != N_JOINTS or (n is not None and a.shape[0] != n):
         raise ValueError(f"{name} must have shape ({'n' if n is None else n}, {N_JOINTS}), got {a.shape}")
-    _check_finite(a, name)
+    check_finite(a, name)
     return a
 
 
 def _radius(r, name: str, n: int) -> np.ndarray:
-    a = _real_array(r, name)
+    a = real_array(r, name)
     try:
         a = np.broadcast_to(a, (n, N_JOINTS)).astype(float)
     except ValueError:
@@ -218,8 +213,8 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     t0 = time.perf_counter()
     Wc, D, y = _check_interval_matrix(Wc, D, y)
     m, p = Wc.shape
-    b, scalar = _check_bound(bound, m)
-    lo, hi, names = _check_prior(prior, p)
+    b, scalar = check_bound(bound, m)
+    lo, hi, names = check_prior(prior, p)
     if np.any(lo < 0):
         bad = [names[j] for j in np.flatnonzero(lo < 0)]
         raise ValueError(f"prior lower must be >= 0 for the interval regressor (Oettli-Prager polytope form "
@@ -244,7 +239,7 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
         return A, BL, BU
 
     info: dict = {"method": "interval", "rows": m}
-    center = _least_squares_center(Wc.T @ Wc, Wc, y, lo, hi, None if scalar else b)
+    center = least_squares_center(Wc.T @ Wc, Wc, y, lo, hi, None if scalar else b)
     A, BL, BU = stacked(b)
     if np.any(BL > BU):  # a row whose range over the prior misses its strip: S is empty (rigorous)
         s_lo, s_up, _, _ = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol, center)
@@ -292,7 +287,7 @@ def encoder_radii(counts_per_turn: int, dt: float, cutoff_hz: float, order: int 
     """Rigorous radii ``(r_q, r_qd, r_qdd)`` [rad, rad/s, rad/s^2] of the encoder part of the state estimates.
 
     counts_per_turn : encoder counts per turn (error ``|e| <= pi / counts``, rounding to the nearest count);
-    dt, cutoff_hz, order : the processing of :func:`ident.filtering.derivatives`; n : the record's length in
+    dt, cutoff_hz, order : the processing of :func:`ident.processing.filtering.derivatives`; n : the record's length in
     samples (default: long).
 
     The estimate is linear in the measured angles, ``s = P q_meas``, so the encoder part is ``P e`` and
@@ -410,8 +405,8 @@ def filter_interval(Wc, D, y, bound, factor: int, taps):
     """The parallel filter of an interval equation: ``h * [Wc ± D] ⊆ [h * Wc ± (|h| * D + rounding)]``.
 
     Wc, D : (4n, p); y : (4n,); bound : scalar or (4n,); factor, taps : decimation and FIR as in
-    :func:`ident.filtering.parallel_filter` (which computes every filtered quantity and its rounding bound).
-    Returns ``(Wc_f, D_f, y_f, bound_f, fe)`` with ``fe`` the :class:`~ident.filtering.FilteredEquation` of the
+    :func:`ident.processing.filtering.parallel_filter` (which computes every filtered quantity and its rounding bound).
+    Returns ``(Wc_f, D_f, y_f, bound_f, fe)`` with ``fe`` the :class:`~ident.processing.filtering.FilteredEquation` of the
     centre (sample_index, rows, ...). Rigorous: the radius adds the floating-point error bounds of ``h * Wc``
     and of ``|h| * D`` and is rounded up.
     """

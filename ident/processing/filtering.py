@@ -36,7 +36,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.signal
 
-from sim.validation import as_float_array, check_finite, joint_array, positive, positive_int
+from ident.validation import as_float_array, check_finite, joint_array, positive, positive_int
 
 __all__ = [
     "TORQUE_TIMINGS",

@@ -4,9 +4,9 @@ Error model (paper sec. 3): ``|y_k - W_k theta| <= bound_k`` for every row k, ``
 The feasible set ``S = {theta in Q : |y - W theta| <= bound}`` is a polytope; the methods return boxes that
 contain it:
 
-* ``"hull"`` (:mod:`ident.hull`): the exact interval hull of S, 2p linear programs with rigorous (safe
+* ``"hull"`` (:mod:`ident.estimators.hull`): the exact interval hull of S, 2p linear programs with rigorous (safe
   dual) endpoints; shrinks like 1/N.
-* ``"cgsp"`` (:mod:`ident.cgsp`): the paper's preconditioned interval Gauss-Seidel on Rump's system;
+* ``"cgsp"`` (:mod:`ident.estimators.cgsp`): the paper's preconditioned interval Gauss-Seidel on Rump's system;
   equals ``hull(W^+ [Y]) & Q`` for a point regressor and does not shrink with N.
 
 Both are guaranteed outer enclosures. An empty S raises :class:`InconsistentDataError` (only when the
@@ -21,123 +21,31 @@ import warnings
 
 import numpy as np
 
-from ident.cgsp import cgsp
-from ident.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
-from ident.lpsolver import LPError, LPFallbackWarning
-from ident.parameters import PARAMETER_NAMES, Box
+from ident.box import Box, default_names
+from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
+from ident.estimators import registry
+from ident.estimators.cgsp import cgsp
+from ident.estimators.checks import check_bound, check_prior, check_W_y
+from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
 
 __all__ = [
     "METHODS",
     "InconsistentDataError",
     "UnidentifiableError",
     "default_names",
+    "cgsp_estimator",
     "estimate",
+    "hull_estimator",
     "identifiability",
     "min_consistent_bound",
 ]
 
-METHODS = ("hull", "cgsp")
+METHODS = tuple(registry.BUILTINS)  # the built-in set-membership methods, read from the one registry
 
 
-class InconsistentDataError(ValueError):
-    """The data contradict the error bound: no theta in the prior satisfies ``|y - W theta| <= bound``.
-
-    ``min_bound`` is the smallest scalar bound that makes the data consistent with the prior (rounded up,
-    so ``bound = min_bound`` is guaranteed consistent); ``bound`` the bound that was given (scalar or the
-    largest per-row value); ``scale_lower`` a proven lower bound of the factor by which the given bound(s)
-    must be multiplied to become consistent (``> 1``).
-    """
-
-    def __init__(self, message: str, *, min_bound: float, bound: float, scale_lower: float) -> None:
-        super().__init__(message)
-        self.min_bound = float(min_bound)
-        self.bound = float(bound)
-        self.scale_lower = float(scale_lower)
-
-
-class UnidentifiableError(ValueError):
-    """The data do not determine some parameters (rank-deficient regressor); ``names`` lists them."""
-
-    def __init__(self, message: str, *, names: tuple[str, ...]) -> None:
-        super().__init__(message)
-        self.names = tuple(names)
 
 
 # ------------------------------------------------------------------------------------------- validation
-def default_names(p: int) -> tuple[str, ...]:
-    """``PARAMETER_NAMES`` when ``p == 14``, else ``theta1 .. thetap``."""
-    return PARAMETER_NAMES if p == len(PARAMETER_NAMES) else tuple(f"theta{i + 1}" for i in range(p))
-
-
-def _real_array(x, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except Exception as exc:  # ragged lists and the like
-        raise TypeError(f"{name} must be a real numeric array, got {type(x).__name__} ({exc})") from None
-    if arr.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
-    arr = np.asarray(arr, dtype=float)
-    return np.ascontiguousarray(arr) if arr.ndim else arr
-
-
-def _check_finite(arr: np.ndarray, name: str) -> None:
-    if np.isfinite(arr.sum()):  # one pass, no temporary; a NaN or inf anywhere makes the sum non-finite
-        return
-    bad = ~np.isfinite(arr)
-    if not bad.any():
-        return  # the sum overflowed, the entries are fine
-    n_nan = int(np.isnan(arr).sum())
-    n_inf = int(bad.sum()) - n_nan
-    first = tuple(int(i) for i in np.unravel_index(int(np.flatnonzero(bad.ravel())[0]), arr.shape))
-    raise ValueError(f"{name} must be finite, got {n_nan} NaN and {n_inf} inf entries (first at index {first})")
-
-
-def _check_W_y(W, y) -> tuple[np.ndarray, np.ndarray]:
-    W = _real_array(W, "W")
-    if W.ndim != 2 or W.shape[1] < 1 or W.shape[0] < W.shape[1]:
-        raise ValueError(f"W must have shape (m, p) with m >= p >= 1, got {W.shape}")
-    _check_finite(W, "W")
-    y = _real_array(y, "y")
-    if y.shape != (W.shape[0],):
-        raise ValueError(f"y must have shape (m,) = ({W.shape[0]},) to match W, got {y.shape}")
-    _check_finite(y, "y")
-    return W, y
-
-
-def _check_bound(bound, m: int) -> tuple[np.ndarray, bool]:
-    b = _real_array(bound, "bound")
-    if b.ndim == 0:
-        if not (np.isfinite(b) and b > 0):
-            raise ValueError(f"bound must be finite and > 0 (a scalar or one value per row), got {float(b)!r}")
-        return np.full(m, float(b)), True
-    if b.shape != (m,):
-        raise ValueError(f"bound must be a scalar or have shape (m,) = ({m},), got shape {b.shape}")
-    bad = ~(np.isfinite(b) & (b > 0))
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"bound must be finite and > 0 in every row, got {float(b[k])!r} at row {k} ({int(bad.sum())} bad rows)")
-    return b, False
-
-
-def _check_prior(prior, p: int) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    if isinstance(prior, Box):
-        lo, hi, names = np.array(prior.lower, dtype=float), np.array(prior.upper, dtype=float), prior.names
-    elif isinstance(prior, (tuple, list)) and len(prior) == 2:
-        lo = _real_array(prior[0], "prior lower")
-        hi = _real_array(prior[1], "prior upper")
-        names = default_names(p)
-    else:
-        raise TypeError(f"prior must be a Box or a (lower, upper) pair of arrays of length {p}, got {type(prior).__name__}")
-    if lo.shape != (p,) or hi.shape != (p,):
-        raise ValueError(f"prior lower and upper must have shape ({p},) to match W's columns, got {lo.shape} and {hi.shape}")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise ValueError("prior must be finite: an interval hull needs a bounded prior box (got NaN or inf bounds)")
-    if np.any(lo > hi):
-        bad = [names[i] for i in np.flatnonzero(lo > hi)]
-        raise ValueError(f"prior lower must be <= upper, violated for {bad}")
-    return lo, hi, tuple(names)
-
-
 def _check_method(method) -> str:
     if not isinstance(method, str):
         raise TypeError(f"method must be a string, one of {METHODS}, got {type(method).__name__}")
@@ -207,14 +115,14 @@ def min_consistent_bound(W, y, prior) -> float:
     residual ``max |y - W theta*|`` at the LP's solution rounded upward, so ``bound = min_consistent_bound``
     is guaranteed consistent; it exceeds ``t*`` only by the LP tolerance (about 1e-9 relative).
     """
-    W, y = _check_W_y(W, y)
-    lo, hi, _ = _check_prior(prior, W.shape[1])
+    W, y = check_W_y(W, y)
+    lo, hi, _ = check_prior(prior, W.shape[1])
     G = W.T @ W
-    return _min_bound(W, y, lo, hi, _least_squares_center(G, W, y, lo, hi))
+    return _min_bound(W, y, lo, hi, least_squares_center(G, W, y, lo, hi))
 
 
 # ------------------------------------------------------------------------------------------------ estimate
-def _least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=None) -> np.ndarray:
+def least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=None) -> np.ndarray:
     """Least squares of the rows weighted by ``1 / b`` (G = W^T W when b is None or constant), clipped to
     the prior; column-equilibrated, so the point does not depend on the units of rows or parameters."""
     if b is not None and np.any(b != b[0]):
@@ -234,8 +142,8 @@ def _least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b
     return np.clip(sol, lo, hi)
 
 
-def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: bool = True) -> Box:
-    """Guaranteed box enclosing ``S = {theta in prior : |y - W theta| <= bound}``.
+def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: bool = True) -> Box:
+    """The built-in estimators ``"hull"`` and ``"cgsp"``: a guaranteed box enclosing ``S = {theta in prior : |y - W theta| <= bound}``.
 
     W : (m, p) regressor (rows stacked sample k, joint i -> row 4k + i for the H4, any order works);
     y : (m,) measurements (e.g. motor torques [N m]); bound : scalar or (m,) positive error bound(s) in the
@@ -257,26 +165,26 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     change of the problem by the rounding of the converted data (``tests/ident/test_units.py`` states and
     checks the tolerance); the LPs are scaled inside (rows by their bound, then columns, powers of two).
     When HiGHS cannot solve an LP, the affected endpoints are coarser safe bounds or the prior's and a
-    :class:`~ident.lpsolver.LPFallbackWarning` says which (``info['fallbacks']``); a fallback never makes a
+    :class:`~ident.numerics.lp.LPFallbackWarning` says which (``info['fallbacks']``); a fallback never makes a
     box tighter.
     """
     t0 = time.perf_counter()
     method = _check_method(method)
-    W, y = _check_W_y(W, y)
+    W, y = check_W_y(W, y)
     n, p = W.shape
-    b, scalar = _check_bound(bound, n)
-    lo, hi, names = _check_prior(prior, p)
+    b, scalar = check_bound(bound, n)
+    lo, hi, names = check_prior(prior, p)
     bl, bu = strip_bounds(y, b)
 
     G = W.T @ W
     info: dict = {"method": method}
     info.update(identifiability(W, names, gram=G))
 
-    center = _least_squares_center(G, W, y, lo, hi, None if scalar else b)
+    center = least_squares_center(G, W, y, lo, hi, None if scalar else b)
 
     def fallback(what: str) -> None:
         info.setdefault("fallbacks", []).append(what)
-        warnings.warn(f"estimate: {what}", LPFallbackWarning, stacklevel=3)
+        warnings.warn(f"estimate: {what}", LPFallbackWarning, stacklevel=6)  # the caller of estimate
 
     def check_consistency_by_lp():
         """Chebyshev LP with weights b: raise if S is proven empty, else record whether it is proven non-empty.
@@ -348,3 +256,35 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
     info["at_prior"] = tuple(names[j] for j in np.flatnonzero(at_prior))
     info["seconds"] = time.perf_counter() - t0
     return Box(lower=lower, upper=upper, names=names, info=info)
+
+
+def hull_estimator(W, y, bound, prior, *, check_consistency: bool = True) -> Box:
+    """The built-in ``"hull"`` (:func:`_builtin_estimate` with ``method="hull"``; ``check_consistency`` is
+    accepted for symmetry: the hull always decides emptiness)."""
+    return _builtin_estimate(W, y, bound, prior, "hull", check_consistency=check_consistency)
+
+
+def cgsp_estimator(W, y, bound, prior, *, check_consistency: bool = True) -> Box:
+    """The built-in ``"cgsp"`` (:func:`_builtin_estimate` with ``method="cgsp"``)."""
+    return _builtin_estimate(W, y, bound, prior, "cgsp", check_consistency=check_consistency)
+
+
+def estimate(W, y, bound, prior, method="hull", *, check_consistency: bool = True, **context) -> Box:
+    """Guaranteed (or, for a statistical plugin, confidence) box of ``theta`` from ``|y - W theta| <= bound``.
+
+    W : (m, p) regressor (rows stacked sample k, joint i -> row 4k + i for the H4, any order works); y : (m,)
+    measurements (e.g. motor torques [N m]); bound : scalar or (m,) positive error bound(s) in the units of y;
+    prior : :class:`~ident.Box` or ``(lower, upper)`` finite arrays of length p.
+    method : a built-in name (``"hull"``: the exact hull, rigorous LP endpoints; ``"cgsp"``: the paper's
+    contractor; see :func:`_builtin_estimate` for their ``info``), the name of an entry point of group
+    ``h4bench.estimators``, a ``"package.module:attribute"`` string or a callable ``f(W, y, bound, prior,
+    **context) -> Box`` (:mod:`ident.estimators.registry`). check_consistency : for ``"cgsp"``, also solve one
+    Chebyshev LP to detect an empty S the contractor did not expose. context : ``groups`` ((m,) ints),
+    ``instruments`` ((m, p)), passed only to estimators that accept them.
+    Returns the Box (checked: the prior's shape, finite, lower <= upper, else
+    :class:`~ident.EstimatorError` naming the estimator). Raises :class:`InconsistentDataError` when S is
+    proven empty; ``ValueError``/``TypeError`` on bad input.
+    """
+    est = registry.get(method)
+    context["check_consistency"] = check_consistency  # a keyword of the built-ins, dropped for others
+    return registry.call(est, W, y, bound, prior, **context)

@@ -12,7 +12,7 @@ sample k, joint i -> row ``joints * k + i``.
    ``std_i = sqrt(C_ii)`` and ``%sigma_i = 100 std_i / |theta_i|``.
 
 Computed with an SVD of the column-equilibrated weighted matrix, so a rank-deficient W is detected and
-reported by parameter name (:class:`~ident.estimate.UnidentifiableError`) instead of producing NaN.
+reported by parameter name (:class:`~ident.estimators.estimate.UnidentifiableError`) instead of producing NaN.
 """
 
 from __future__ import annotations
@@ -21,7 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident.estimate import UnidentifiableError, _check_W_y, default_names
+from ident.box import default_names
+from ident.errors import UnidentifiableError
+from ident.estimators.checks import check_W_y
 
 __all__ = ["WLSResult", "wls"]
 
@@ -72,12 +74,12 @@ def wls(W, y, joints: int = 4, *, names=None, joint_of_row=None) -> WLSResult:
     W : (m, p) regressor with ``m = joints * n_samples`` rows stacked sample-major; y : (m,) torques;
     joints : rows per sample (4 for the H4); names : p parameter names (default :func:`default_names`);
     joint_of_row : optional (m,) joint index of each row (0..joints-1), for equations whose rows were
-    selected individually (e.g. ``ident.processing.Equation.joint``); then m need not be a multiple of joints.
+    selected individually (e.g. ``ident.processing.processing.Equation.joint``); then m need not be a multiple of joints.
     Raises ``ValueError`` on bad input (shapes, non-finite values, too few rows per joint, a joint whose
     OLS residual is at rounding level, below 1e-12 of its rms torque, so its weight is undefined) and :class:`UnidentifiableError` naming the
     parameters the data do not determine when W (weighted, column-equilibrated) is rank-deficient.
     """
-    W, y = _check_W_y(W, y)
+    W, y = check_W_y(W, y)
     m, p = W.shape
     if isinstance(joints, bool) or not isinstance(joints, (int, np.integer)):
         raise TypeError(f"joints must be an int >= 1, got {type(joints).__name__}")

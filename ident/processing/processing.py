@@ -1,6 +1,6 @@
 """From measured data to the bounded-error equation ``y = W theta + e``, ``|e| <= bound`` row by row.
 
-The paper's chain (section 4.1), each step in :mod:`ident.filtering`:
+The paper's chain (section 4.1), each step in :mod:`ident.processing.filtering`:
 
 1. zero-phase Butterworth low-pass on the measured q, central differences for qd and qdd; the samples at
    both ends (filter transients) are dropped;
@@ -20,9 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.filtering import (N_JOINTS, ProcessingSettings, default_edge_samples, derivatives, exclude_low_speed,
-                             parallel_filter)
-from ident.regressor import parameter_names, regressor
+from ident.errors import ProcessingError
+from ident.processing.filtering import (N_JOINTS, ProcessingSettings, default_edge_samples, derivatives,
+                                        exclude_low_speed, parallel_filter)
+from ident.robots.h4 import parameter_names, regressor
 
 
 @dataclass(frozen=True)
@@ -68,9 +69,6 @@ def raw_equation(geometry, q, tau, dt: float, settings: ProcessingSettings | Non
     keep = exclude_low_speed(qd, settings.speed_threshold)
     return w, y, keep, samples, (qf, qd, qdd)
 
-
-class ProcessingError(ValueError):
-    """The data cannot give an equation: too short a log, or no row free of slow samples."""
 
 
 BLOCK_SAMPLES = 100_000  # samples per processing block: ~45 MB of raw regressor; logs up to this size are one block

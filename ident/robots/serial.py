@@ -1,7 +1,7 @@
 """Inverse-dynamics regressor of a serial robot read from a URDF (pinocchio), and its base parameters.
 
 A second provider of ``(W, y, bound)`` for the robot-agnostic estimators of :mod:`ident` (the first is the H4's
-:mod:`ident.regressor`). For ``n_joints`` actuated joints the torque model is linear in the standard parameters:
+:mod:`ident.robots.h4`). For ``n_joints`` actuated joints the torque model is linear in the standard parameters:
 
     tau_i = Y_i(q, qd, qdd) . pi  +  fv_i qd_i + fs_i sign(qd_i) + Ia_i qdd_i + off_i   (+ coupled-wrist terms)
 
@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim.validation import as_float_array, check_finite
+from ident.validation import as_float_array, check_finite
 
 __all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters", "default_reach", "physical_prior"]
 
@@ -53,7 +53,7 @@ def _pinocchio():
     try:
         import pinocchio
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("ident.serial needs pinocchio: pip install pin") from exc
+        raise ImportError("ident.robots.serial needs pinocchio: pip install pin") from exc
     return pinocchio
 
 
@@ -424,7 +424,7 @@ def rich_friction_columns(qd, v_s: float) -> tuple[np.ndarray, tuple[str, ...]]:
 
 
 def _by_fours(fn, X: np.ndarray) -> list[np.ndarray]:
-    """Apply ``fn`` (written for 4 joint columns, :mod:`ident.filtering`) to groups of 4 columns of X (n, nj),
+    """Apply ``fn`` (written for 4 joint columns, :mod:`ident.processing.filtering`) to groups of 4 columns of X (n, nj),
     the last group padded by repeating its columns; returns fn's outputs per group with the pad removed."""
     nj = X.shape[1]
     outs = []
@@ -479,13 +479,13 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
             numtaps: int | None = None, fir_cutoff: float = 0.8, speed_threshold: float = 0.05,
             theta_abs_max=None, butter_order: int = 4, first_sample: int = 0, rich_friction: float | None = None,
             keep_raw: bool = False) -> SerialEquation:
-    """The paper's processing chain (:mod:`ident.processing`) for an n-joint serial robot.
+    """The paper's processing chain (:mod:`ident.processing.processing`) for an n-joint serial robot.
 
     q : (n, nj) measured joint angles [rad]; tau : (n, nj) joint torques [N m]; dt [s]; cutoff_hz : zero-phase
-    Butterworth cut-off on q (one pass) [Hz]; derivatives by central differences (:func:`ident.filtering.derivatives`,
+    Butterworth cut-off on q (one pass) [Hz]; derivatives by central differences (:func:`ident.processing.filtering.derivatives`,
     transient samples dropped); the base regressor; rows whose joint speed (for coupled-wrist rows also
     ``|qd_a + qd_b|``, the argument of ``sign`` in ``fsm``) is below ``speed_threshold`` [rad/s] are marked;
-    parallel filtering (:func:`ident.filtering.parallel_filter`, FIR of :func:`ident.filtering.decimation_fir`)
+    parallel filtering (:func:`ident.processing.filtering.parallel_filter`, FIR of :func:`ident.processing.filtering.decimation_fir`)
     and decimation, an output row kept iff its whole window is free of marked rows. theta_abs_max : (r,) max
     ``|theta_b|`` over the prior, folds the filter's rounding on W into :attr:`SerialEquation.rounding`.
     first_sample : index of q[0] in the whole log (for ``sample``). rich_friction : None, or a Stribeck velocity
@@ -493,10 +493,10 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
     measure how much of the residual the standard law leaves (they are not standard parameters); their
     entries of ``theta_abs_max`` must then be given too. keep_raw : keep the unfiltered equation in
     ``info['raw']`` (``W`` (n', nj, r), ``y`` (n', nj), ``sample`` (n',)) for residual spectra.
-    :mod:`ident.filtering` is written for 4
+    :mod:`ident.processing.filtering` is written for 4
     joints: it is applied here to groups of 4 joints (the last padded by repetition), joint by joint as it is.
     """
-    from ident.filtering import (
+    from ident.processing.filtering import (
         decimation_fir,
         default_edge_samples,
         derivatives,
@@ -571,7 +571,7 @@ def prediction_envelope(W, y, bound, lower, upper, W_new, *, center=None, lp_tol
     Over a box (e.g. the hull of S) the range of a linear function is exact by interval evaluation but ignores
     the correlations of S; over S itself it is an LP per endpoint. Each LP (HiGHS, dual simplex, warm-started
     from the previous optimum, rows scaled by their bound, columns to unit RMS) only steers: the returned
-    endpoint is the Neumaier-Shcherbina safe bound :func:`ident.hull.safe_lower_bound` of the original data
+    endpoint is the Neumaier-Shcherbina safe bound :func:`ident.estimators.hull.safe_lower_bound` of the original data
     with the LP's row duals, rigorous for any duals (an LP that fails gives the box bound). Each endpoint is
     also intersected with the interval evaluation over ``[lower, upper]`` (both are outer bounds).
 
@@ -581,9 +581,9 @@ def prediction_envelope(W, y, bound, lower, upper, W_new, *, center=None, lp_tol
     """
     import time as _time
 
-    from ident.hull import power2_scale, safe_lower_bound, strip_bounds
-    from ident.interval import point_matvec
-    from ident.lpsolver import add_dense_rows, check, new_highs
+    from ident.estimators.hull import power2_scale, safe_lower_bound, strip_bounds
+    from ident.numerics.interval import point_matvec
+    from ident.numerics.lp import add_dense_rows, check, new_highs
 
     t0 = _time.perf_counter()
     W = np.asarray(W, dtype=float)
