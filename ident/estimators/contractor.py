@@ -92,8 +92,9 @@ def contractor(W, y, bound, prior, *, tol: float = 1e-6, max_sweeps: int = 500) 
     Returns
     -------
     ident.Box
-        An outer enclosure of ``{theta in prior : |y - W theta| <= bound}``; ``info`` holds
-        ``sweeps`` and ``set`` (the box itself, ``{"type": "box", ...}``).
+        An outer enclosure of ``{theta in prior : |y - W theta| <= bound}``; ``info`` holds ``sweeps`` and
+        ``set``, the box as a zonotope with diagonal generators (for plots; the Box's bounds are the rigorous
+        result).
 
     Raises
     ------
@@ -109,8 +110,10 @@ def contractor(W, y, bound, prior, *, tol: float = 1e-6, max_sweeps: int = 500) 
     if clo is None:
         raise inconsistent(f"the interval contractor proved the data inconsistent with the prior after {sweeps} "
                            "sweeps: no theta in the prior satisfies |y - W theta| <= bound", W, y, b, prior)
+    centre = 0.5 * (clo + chi)
     return Box(clo, chi, names, info={"method": "contractor", "sweeps": sweeps,
-                                      "set": {"type": "box", "lower": clo.tolist(), "upper": chi.tolist()}})
+                                      "set": {"type": "zonotope", "center": centre.tolist(),
+                                              "generators": np.diag(0.5 * (chi - clo)).tolist()}})
 
 
 contractor.kind = "guaranteed"
