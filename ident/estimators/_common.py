@@ -9,25 +9,15 @@ from __future__ import annotations
 import numpy as np
 
 from ident import Box
-
-try:  # the interval arithmetic module, wherever the package keeps it
-    from ident.numerics import interval as ia  # noqa: F401
-except ImportError:  # pragma: no cover - older layout
-    from ident import interval as ia  # noqa: F401
+from ident.estimators.checks import check_finite, real_array
+from ident.numerics import interval as ia  # noqa: F401  (re-exported for the contractor)
 
 
 def _real(x, name: str, ndim: int) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except Exception as exc:  # ragged lists and the like
-        raise TypeError(f"{name} must be a real numeric array, got {type(x).__name__} ({exc})") from None
-    if arr.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
-    arr = np.ascontiguousarray(arr, dtype=float) if arr.ndim else np.asarray(arr, dtype=float)
+    arr = real_array(x, name)
     if ndim >= 0 and arr.ndim != ndim:
         raise ValueError(f"{name} must be {ndim}-dimensional, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite (no NaN or inf)")
+    check_finite(arr, name)
     return arr
 
 
