@@ -94,8 +94,8 @@ def _check_list(value, where: str, allowed: tuple[str, ...], allow_empty: bool) 
 def _check_methods(value, where: str) -> None:
     """Box estimators: any name the estimator registry resolves (a built-in, an entry point, module:attribute)."""
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-        raise ScenarioError(f"{where} must be a list of estimator names (built-in: {tuple(registry.BUILTINS)}), "
-                            f"got {value!r}")
+        raise ScenarioError(f"{where} must be a list of strings, estimator names (built-in: "
+                            f"{tuple(registry.BUILTINS)}), got {value!r}")
     for v in value:
         try:
             registry.get(v)

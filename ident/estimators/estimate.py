@@ -11,7 +11,8 @@ contain it:
 
 Both are guaranteed outer enclosures. An empty S raises :class:`InconsistentDataError` (only when the
 emptiness is proven: a safe dual bound of the weighted Chebyshev fit exceeds 1, or the contractor emptied
-the box). Inputs are validated here; errors name the argument, what was expected and what came.
+the box). Inputs are validated (:mod:`ident.estimators.checks`); errors name the argument, what was expected and what
+came. Every method, built-in or plugin, is resolved by the one registry (:mod:`ident.estimators.registry`).
 """
 
 from __future__ import annotations

@@ -190,3 +190,20 @@ def test_context_keywords_are_passed_only_when_accepted():
         ident.estimate(W, y, b, prior, method=with_kwargs, instruments=instruments[:, :2])
     with pytest.raises(ValueError, match=r"groups must be an integer array of shape \(60,\)"):
         ident.estimate(W, y, b, prior, method=with_groups, groups=groups[:-1])
+
+
+def test_the_spec_check_and_identify_accept_what_the_registry_resolves(tmp_path, monkeypatch):
+    from scenarios.identify import check_method
+    from scenarios.spec import ScenarioError, load_spec
+
+    (tmp_path / "h4plugin_spec.py").write_text(PLUGIN_SOURCE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spec = tmp_path / "s.toml"
+    spec.write_text('kind = "paper"\n[estimators]\nmethods = ["hull", "h4plugin_spec:estimator"]\n')
+    assert load_spec(spec)["estimators"]["methods"] == ["hull", "h4plugin_spec:estimator"]
+    spec.write_text('kind = "paper"\n[estimators]\nmethods = ["hull", "lsq"]\n')
+    with pytest.raises(ScenarioError, match="estimators.methods: method must be one of .*got 'lsq'"):
+        load_spec(spec)
+    assert check_method("wls") == "wls" and check_method("h4plugin_spec:estimator") == "h4plugin_spec:estimator"
+    with pytest.raises(ValueError, match=r"method must be one of \('hull', 'cgsp', 'wls'\)"):
+        check_method("lsq")
