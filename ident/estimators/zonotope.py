@@ -1,0 +1,220 @@
+"""Zonotope outer bound of the feasible set by sequential strip intersection, with order reduction.
+
+Alamo, Bravo & Camacho, "Guaranteed state estimation by zonotopes", Automatica 41(6):1035-1043, 2005;
+Bravo, Alamo & Camacho, "Bounded error identification of systems with time-varying parameters",
+IEEE TAC 51(7):1144-1150, 2006. A zonotope ``Z = <c, G> = {c + G xi : |xi|_inf <= 1}`` (G : (p, m)) and a strip
+``S = {theta : |y - w^T theta| <= b}`` give, for every ``lambda`` in R^p,
+
+    Z ∩ S  ⊆  Z(lambda) = < c + lambda (y - w^T c), [(I - lambda w^T) G, b lambda] >
+
+(Alamo et al. 2005, property 2). ``lambda`` minimises the F-radius ``|G(lambda)|_F^2``, in closed form
+``lambda = G G^T w / (w^T G G^T w + b^2)`` (Alamo et al. 2005, sec. 4). Before the update the strip is narrowed
+to its intersection with the zonotope's own range of ``w^T theta`` (``w^T c +- |G^T w|_1``), which leaves
+``Z ∩ S`` unchanged; a row whose strip contains that range does not cut and is skipped, a row whose strip
+misses it proves the set empty.
+
+Order reduction (Girard, HSCC 2005; Combastel, IFAC 2003): when the zonotope reaches ``(order + 1) p``
+generators (one per cutting row is added), the ``(order - 1) p`` generators with the largest ``|g|_1 - |g|_inf``
+are kept and the others replaced by their interval hull (``p`` axis-aligned generators), leaving ``order p``
+(default ``order = 3``: 42 for p = 14, at most 56 between reductions). The reduced zonotope contains the
+original. Reducing in batches of ``p`` rows matters: reducing after every row (boxing the newest generator
+each time) made the F-radius grow geometrically on random data (to 1e6 within 200 rows, p = 14), while
+batches of p rows stay bounded.
+
+:func:`parallelotope` is the ``p``-generator special case of Chisci, Garulli & Zappa, "Recursive state
+bounding by parallelotopes", Automatica 32(7):1049-1055, 1996: with the strip narrowed as above, each
+candidate ``lambda = g_j / (w^T g_j)`` of the same family removes generator ``j``'s component along ``w``
+and replaces ``g_j`` by ``b g_j / (w^T g_j)``; this is the parallelotope bounded by the strip and the other
+``p - 1`` face pairs, of volume ``|det G| b / |w^T g_j|``. The minimum-volume candidate (``j`` maximising
+``|w^T g_j|``) is taken when it is smaller than the current parallelotope, otherwise the row is skipped.
+No order reduction is needed (p generators throughout).
+
+Measured on random data (W Gaussian, N = 20 000, p = 14, bound 0.1, prior truth +- 1): the median width
+over the exact hull's is about 2100 for the F-radius zonotope (order 3, 0.5 s) and about 710 for the
+parallelotope (0.1 s); both are shipped as references. Neither is rigorous in floating point (the updates
+are rounded to nearest): ``rigorous = False``. The box is the interval hull ``c +- |G| 1`` intersected with
+the prior. As a cheap safeguard each strip is widened by ``8 (p + 2) u`` times the magnitudes involved
+(``|y_k| + b_k + |w_k| |c| + |G^T w_k|_1``, ``u = 2^-53``): without it the parallelotope reported 186 of 200
+consistent critical-bound cases (``b_k = |y_k - w_k theta_true|`` rounded up, p = 2..4, N = 40) as inconsistent
+and lost the truth in 4 others.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ident import Box
+from ident.estimators._common import check_inputs, clip_to_prior, inconsistent
+
+__all__ = ["parallelotope", "zonotope", "zonotope_at"]
+
+
+def _pad(p: int) -> float:
+    """Relative widening of each strip, ``8 (p + 2) u``: a safeguard against rounding, not a proof."""
+    return 8.0 * (p + 2) * 2.0**-53
+
+
+def _reduce(G: np.ndarray, keep: int) -> np.ndarray:
+    """Girard's reduction: keep the ``keep`` largest generators by ``|g|_1 - |g|_inf``, box the rest."""
+    A = np.abs(G)
+    score = A.sum(axis=0) - A.max(axis=0)
+    idx = np.argpartition(score, -keep)[-keep:] if keep > 0 else np.empty(0, dtype=int)
+    rest = np.ones(G.shape[1], dtype=bool)
+    rest[idx] = False
+    return np.concatenate([G[:, idx], np.diag(A[:, rest].sum(axis=1))], axis=1)
+
+
+def _zonotope(W, y, bound, prior, order: int) -> Box:
+    W, y, b, lo, hi, names = check_inputs(W, y, bound, prior)
+    N, p = W.shape
+    if int(order) != order or order < 1:
+        raise ValueError(f"order must be an integer >= 1, got {order!r}")
+    order = int(order)
+    c = 0.5 * (lo + hi)
+    G = np.diag(0.5 * (hi - lo))
+    cap = (order + 1) * p - 1
+    rel = _pad(p)
+    keep = (order - 1) * p
+    cuts = 0
+    for k in range(N):
+        w = W[k]
+        Gw = G.T @ w  # (m,)
+        wc = float(w @ c)
+        r = float(np.abs(Gw).sum())
+        pad = rel * (abs(y[k]) + b[k] + float(np.abs(w) @ np.abs(c)) + r)  # rounding safeguard (not a proof)
+        slo = max(y[k] - b[k] - pad, wc - r)
+        shi = min(y[k] + b[k] + pad, wc + r)
+        if slo > shi:
+            raise inconsistent(f"the zonotope misses the strip of row {k}: the data appear inconsistent with the prior "
+                               "and the bound", W, y, b, prior)
+        if slo <= wc - r and shi >= wc + r:
+            continue  # the strip contains the zonotope's range: no cut
+        yk = 0.5 * (slo + shi)
+        bk = 0.5 * (shi - slo)
+        GGw = G @ Gw  # G G^T w
+        den = float(w @ GGw) + bk * bk
+        if not den > 0.0:
+            continue
+        lam = GGw / den
+        c = c + lam * (yk - wc)
+        G = np.concatenate([G - np.outer(lam, Gw), (bk * lam)[:, None]], axis=1)
+        cuts += 1
+        if G.shape[1] > cap:
+            G = _reduce(G, keep)
+    rad = np.abs(G).sum(axis=1)
+    clipped = clip_to_prior(c - rad, c + rad, lo, hi)
+    if clipped is None:
+        raise inconsistent("the zonotope does not meet the prior", W, y, b, prior)
+    return Box(clipped[0], clipped[1], names,
+               info={"method": "zonotope", "order": order, "cuts": cuts,
+                     "set": {"type": "zonotope", "center": c.tolist(), "generators": G.tolist()}})
+
+
+def zonotope_at(order: int):
+    """The :func:`zonotope` estimator with at most ``order * p`` generators (order >= 1)."""
+    if int(order) != order or order < 1:
+        raise ValueError(f"order must be an integer >= 1, got {order!r}")
+
+    def estimator(W, y, bound, prior) -> Box:
+        return _zonotope(W, y, bound, prior, int(order))
+
+    estimator.__name__ = f"zonotope_order{int(order)}"
+    estimator.__doc__ = zonotope.__doc__
+    estimator.kind = "guaranteed"
+    estimator.rigorous = False
+    estimator.description = (f"zonotope by sequential strip intersection (F-radius), order reduction to "
+                             f"{int(order)} p generators (not rigorous in fp)")
+    estimator.citation = zonotope.citation
+    return estimator
+
+
+def zonotope(W, y, bound, prior, *, order: int = 3) -> Box:
+    """Zonotope outer bound by sequential strip intersection (Alamo, Bravo & Camacho 2005).
+
+    Parameters
+    ----------
+    W : (N, p) regressor; y : (N,) observations; bound : (N,) or scalar > 0, the error bound of each row
+        in y's units; prior : ident.Box with finite bounds (the first zonotope).
+    order : at most ``order * p`` generators are kept (Girard's reduction), default 3.
+
+    Returns
+    -------
+    ident.Box
+        The zonotope's interval hull intersected with the prior; ``info["set"]`` the zonotope
+        (``{"type": "zonotope", "center": (p,), "generators": (p, m)}``).
+
+    Raises
+    ------
+    ident.InconsistentDataError
+        when a strip misses the zonotope (the feasible set is then empty, up to rounding).
+    """
+    return _zonotope(W, y, bound, prior, order)
+
+
+zonotope.kind = "guaranteed"
+zonotope.rigorous = False
+zonotope.description = ("zonotope by sequential strip intersection (F-radius), order reduction to 3 p generators "
+                        "(not rigorous in fp)")
+zonotope.citation = ("T. Alamo, J. M. Bravo, E. F. Camacho, Guaranteed state estimation by zonotopes, Automatica "
+                     "41(6):1035-1043, 2005; J. M. Bravo, T. Alamo, E. F. Camacho, IEEE TAC 51(7):1144-1150, 2006")
+
+
+def parallelotope(W, y, bound, prior) -> Box:
+    """Minimum-volume parallelotope by sequential strip intersection (Chisci, Garulli & Zappa 1996).
+
+    Parameters
+    ----------
+    W : (N, p) regressor; y : (N,) observations; bound : (N,) or scalar > 0, the error bound of each row
+        in y's units; prior : ident.Box with finite bounds (the first parallelotope).
+
+    Returns
+    -------
+    ident.Box
+        The parallelotope's interval hull intersected with the prior; ``info["set"]`` the parallelotope as a
+        zonotope with p generators (``{"type": "zonotope", "center": (p,), "generators": (p, p)}``).
+
+    Raises
+    ------
+    ident.InconsistentDataError
+        when a strip misses the parallelotope (the feasible set is then empty, up to rounding).
+    """
+    W, y, b, lo, hi, names = check_inputs(W, y, bound, prior)
+    N, p = W.shape
+    c = 0.5 * (lo + hi)
+    G = np.diag(0.5 * (hi - lo))
+    rel = _pad(p)
+    cuts = 0
+    for k in range(N):
+        w = W[k]
+        Gw = G.T @ w
+        wc = float(w @ c)
+        r = float(np.abs(Gw).sum())
+        pad = rel * (abs(y[k]) + b[k] + float(np.abs(w) @ np.abs(c)) + r)  # rounding safeguard (not a proof)
+        slo = max(y[k] - b[k] - pad, wc - r)
+        shi = min(y[k] + b[k] + pad, wc + r)
+        if slo > shi:
+            raise inconsistent(f"the parallelotope misses the strip of row {k}: the data appear inconsistent with "
+                               "the prior and the bound", W, y, b, prior)
+        bk = 0.5 * (shi - slo)
+        j = int(np.argmax(np.abs(Gw)))
+        if not bk < abs(Gw[j]):
+            continue  # no candidate has a smaller volume (includes the rows that do not cut)
+        lam = G[:, j] / Gw[j]
+        c = c + lam * (0.5 * (slo + shi) - wc)
+        G = G - np.outer(lam, Gw)
+        G[:, j] = bk * lam
+        cuts += 1
+    rad = np.abs(G).sum(axis=1)
+    clipped = clip_to_prior(c - rad, c + rad, lo, hi)
+    if clipped is None:
+        raise inconsistent("the parallelotope does not meet the prior", W, y, b, prior)
+    return Box(clipped[0], clipped[1], names,
+               info={"method": "parallelotope", "cuts": cuts,
+                     "set": {"type": "zonotope", "center": c.tolist(), "generators": G.tolist()}})
+
+
+parallelotope.kind = "guaranteed"
+parallelotope.rigorous = False
+parallelotope.description = "minimum-volume parallelotope by sequential strip intersection (not rigorous in fp)"
+parallelotope.citation = ("L. Chisci, A. Garulli, G. Zappa, Recursive state bounding by parallelotopes, Automatica "
+                          "32(7):1049-1055, 1996")

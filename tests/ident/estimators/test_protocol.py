@@ -1,0 +1,43 @@
+"""Every reference estimator through the estimator registry by ``module:attribute``: its claims, the context
+keywords it takes, a valid box inside the prior and a set of the documented types."""
+
+import numpy as np
+import pytest
+
+from ident.estimators import registry
+from tests.ident.estimators import oracles
+
+SPECS = {
+    "ident.estimators.ellipsoid:ellipsoid": ("guaranteed", False, "ellipsoid"),
+    "ident.estimators.zonotope:zonotope": ("guaranteed", False, "zonotope"),
+    "ident.estimators.zonotope:parallelotope": ("guaranteed", False, "zonotope"),
+    "ident.estimators.contractor:contractor": ("guaranteed", True, "zonotope"),
+    "ident.estimators.statistical:ols": ("statistical", False, "ellipsoid"),
+    "ident.estimators.statistical:wls": ("statistical", False, "ellipsoid"),
+    "ident.estimators.statistical:iv": ("statistical", False, "ellipsoid"),
+}
+
+
+@pytest.mark.parametrize("spec", sorted(SPECS))
+def test_through_the_registry(spec):
+    kind, rigorous, set_type = SPECS[spec]
+    rng = np.random.default_rng(2)
+    W, y, b, prior, theta = oracles.problem(rng, 4, 400, prior_halfwidth=0.2)
+    est = registry.get(spec)
+    assert (est.kind, est.rigorous) == (kind, rigorous)
+    assert est.description and est.citation
+    assert (est.level == 0.95) if kind == "statistical" else est.level is None
+    box = registry.call(est, W, y, b, prior, groups=np.arange(400) % 4, instruments=W)
+    assert np.all(box.lower >= prior.lower) and np.all(box.upper <= prior.upper)
+    assert box.names == prior.names
+    S = box.info["set"]
+    assert S["type"] == set_type
+    c = np.asarray(S["center"])
+    if set_type == "ellipsoid":
+        assert np.asarray(S["shape"]).shape == (4, 4)
+    else:
+        assert np.asarray(S["generators"]).shape[0] == 4
+    assert c.shape == (4,)
+    if kind == "guaranteed":
+        lo, hi = oracles.exact_hull(W, y, b, prior)
+        assert oracles.box_contains(box, lo, hi)
