@@ -34,7 +34,7 @@ from ident.processing.processing import BLOCK_SAMPLES, build_equation
 from scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 from scenarios.spec import DEFAULTS
 
-METHODS = (*registry.BUILTINS, "wls")  # the built-in box estimators (any the registry resolves works) and WLS
+METHODS = tuple(dict.fromkeys((*registry.BUILTINS, "wls")))  # the built-in box estimators (any the registry resolves works) and WLS
 N_JOINTS = 4
 EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (InconsistentDataError)
 

@@ -271,3 +271,29 @@ register("hull", "ident.estimators.estimate:hull_estimator", kind="guaranteed", 
 register("cgsp", "ident.estimators.estimate:cgsp_estimator", kind="guaranteed", rigorous=True,
          description="the paper's preconditioned interval Gauss-Seidel on Rump's system (an outer box)",
          citation="Poignet, Ramdani & Vivas (CDC 2003, sec. 3); Rump (2002)")
+
+# the reference estimators of the bounded-error literature and the statistical references (their modules carry
+# the same claims as attributes; tests/ident/estimators/test_protocol.py checks the two agree)
+register("ellipsoid", "ident.estimators.ellipsoid:ellipsoid", kind="guaranteed", rigorous=False,
+         description="optimal bounding ellipsoid: recursive minimum-volume strip updates (not rigorous in fp)",
+         citation="Fogel & Huang, Automatica 18(2):229-238, 1982")
+register("zonotope", "ident.estimators.zonotope:zonotope", kind="guaranteed", rigorous=False,
+         description="zonotope by sequential strip intersection (F-radius), order reduction to 3 p generators "
+                     "(not rigorous in fp)",
+         citation="Alamo, Bravo & Camacho, Automatica 41(6):1035-1043, 2005; Bravo, Alamo & Camacho, IEEE TAC "
+                  "51(7):1144-1150, 2006")
+register("parallelotope", "ident.estimators.zonotope:parallelotope", kind="guaranteed", rigorous=False,
+         description="minimum-volume parallelotope by sequential strip intersection (not rigorous in fp)",
+         citation="Chisci, Garulli & Zappa, Automatica 32(7):1049-1055, 1996")
+register("contractor", "ident.estimators.contractor:contractor", kind="guaranteed", rigorous=True,
+         description="forward-backward interval contractor on the strips, Jacobi sweeps to a fixed point",
+         citation="Jaulin, Kieffer, Didrit & Walter, Applied Interval Analysis, Springer 2001, ch. 4")
+register("ols", "ident.estimators.statistical:ols", kind="statistical", rigorous=False, level=0.95,
+         description="least squares, 95 % Bonferroni confidence box (Gaussian homoscedastic errors)",
+         citation="ordinary least squares; Bonferroni simultaneous t intervals")
+register("wls", "ident.estimators.statistical:wls", kind="statistical", rigorous=False, level=0.95,
+         description="Gautier's per-joint weighted least squares, 95 % Bonferroni confidence box",
+         citation="Gautier & Poignet, Control Engineering Practice 9(12):1361-1372, 2001")
+register("iv", "ident.estimators.statistical:iv", kind="statistical", rigorous=False, level=0.95,
+         description="instrumental variables (IDIM-IV), 95 % Bonferroni confidence box (asymptotic)",
+         citation="Janot, Vandanjon & Gautier, IEEE TCST 22(1):132-145, 2014")

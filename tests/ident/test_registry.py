@@ -33,7 +33,8 @@ estimator.description = "the prior box"
 
 
 def test_builtins_are_registered_with_their_claims():
-    assert tuple(registry.BUILTINS) == ("hull", "cgsp")
+    assert tuple(registry.BUILTINS)[:2] == ("hull", "cgsp")
+    assert {"ellipsoid", "zonotope", "parallelotope", "contractor", "ols", "wls", "iv"} <= set(registry.BUILTINS)
     for name in ("hull", "cgsp"):
         est = registry.get(name)
         assert est.kind == "guaranteed" and est.rigorous is True and est.origin == "built-in"
@@ -130,7 +131,7 @@ def test_entry_points_are_listed_and_broken_ones_reported(tmp_path, monkeypatch)
 
 
 def test_unknown_method_and_wrong_type():
-    with pytest.raises(ident.EstimatorError, match=r"method must be one of \('hull', 'cgsp'\).*got 'nope'"):
+    with pytest.raises(ident.EstimatorError, match=r"method must be one of \('hull', 'cgsp', .*\).*got 'nope'"):
         registry.get("nope")
     with pytest.raises(TypeError, match="method must be a string"):
         registry.get(3)
@@ -205,5 +206,5 @@ def test_the_spec_check_and_identify_accept_what_the_registry_resolves(tmp_path,
     with pytest.raises(ScenarioError, match="estimators.methods: method must be one of .*got 'lsq'"):
         load_spec(spec)
     assert check_method("wls") == "wls" and check_method("h4plugin_spec:estimator") == "h4plugin_spec:estimator"
-    with pytest.raises(ValueError, match=r"method must be one of \('hull', 'cgsp', 'wls'\)"):
+    with pytest.raises(ValueError, match=r"method must be one of \('hull', 'cgsp', .*'wls'"):
         check_method("lsq")
