@@ -189,7 +189,7 @@ INF_Y[3] = np.inf
         ({"prior": (np.zeros(3), np.full(3, np.inf))}, ValueError, r"prior must be finite"),
         ({"prior": (np.zeros(2), np.ones(2))}, ValueError, r"prior lower and upper must have shape \(3,\) to match W's columns, got \(2,\)"),
         ({"prior": np.ones(3)}, TypeError, r"prior must be a Box or a \(lower, upper\) pair of arrays of length 3, got ndarray"),
-        ({"method": "lsq"}, ValueError, r"method must be one of \('hull', 'cgsp'\) .*, got 'lsq'"),
+        ({"method": "lsq"}, ValueError, r"method must be one of \('hull', 'cgsp', .*\) .*, got 'lsq'"),
         ({"method": 3}, TypeError, r"method must be a string"),
     ],
 )
