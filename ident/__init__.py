@@ -15,8 +15,8 @@ __all__ += ["InconsistentDataError", "UnidentifiableError", "WLSResult", "estima
 from ident.errors import OutlierBudgetError  # noqa: E402
 from ident.estimators.online import OnlineHull  # noqa: E402
 from ident.estimators.outliers import OutlierRows, detect_outliers, relaxed_hull  # noqa: E402
-from ident.estimators.uncertain import (Distortion, IntervalEquation, interval_equation,  # noqa: E402
-                                        interval_regressor, uncertain_hull)
+from ident.estimators.uncertain import uncertain_hull  # noqa: E402
+from ident.robots.h4_interval import Distortion, IntervalEquation, interval_equation, interval_regressor  # noqa: E402
 
 __all__ += ["Distortion", "IntervalEquation", "OnlineHull", "OutlierBudgetError", "OutlierRows", "detect_outliers",
             "interval_equation", "interval_regressor", "relaxed_hull", "uncertain_hull"]

@@ -24,6 +24,7 @@ import numpy as np
 from ident.box import Box
 from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
 from ident.estimators.cgsp import cgsp
+from ident.estimators.enclosure import Verdict, decide_and_enclose
 from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
 from ident.robots.h4 import PARAMETER_NAMES
 
@@ -275,32 +276,26 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
         return ch
 
     if method == "hull":
-        res = interval_hull(W, bl, bu, lo, hi, scale=b, center=center)
-        crossed = res.status == "ok" and bool(np.any(res.lower > res.upper))  # rigorous: S is empty
-        if res.status == "infeasible" or crossed:
-            ch = check_consistency_by_lp()
-            if ch is None and crossed:
-                raise _inconsistent(W, y, b, scalar, lo, hi, 1.0, center)
-            # not proven empty: HiGHS's verdict is within its tolerance. Enclose S in the slightly larger
-            # S' (bounds scaled by > max(s_upper, 1)), which is non-empty: still an outer box of S. Without
-            # the Chebyshev LP, s_upper is the (rigorous, larger) scaled residual at the least-squares point.
-            s_up, theta = (ch.upper, ch.theta) if ch is not None else (scaled_residual_upper(W, y, b, center), center)
-            factor = max(s_up, 1.0) * (1.0 + 1e-9)
+        def hull(factor, start):
+            if factor == 1.0:
+                return interval_hull(W, bl, bu, lo, hi, scale=b, center=start)
+            fbl, fbu = strip_bounds(y, b * factor)
+            return interval_hull(W, fbl, fbu, lo, hi, scale=b * factor, center=start)
+
+        def decide() -> Verdict:
+            ch = check_consistency_by_lp()  # raises when S is proven empty
+            if ch is None:  # nothing proven: the (rigorous, larger) scaled residual at the least-squares point
+                return Verdict(0.0, scaled_residual_upper(W, y, b, center), center, False)
+            return Verdict(ch.lower, ch.upper, ch.theta, True)
+
+        res, verdict, factor = decide_and_enclose(
+            hull, decide, lambda t: scaled_residual_upper(W, y, b, t),
+            lambda s_lo, s_up: _inconsistent(W, y, b, scalar, lo, hi, s_lo, center), fallback, center, lo, hi)
+        if factor is not None:
             info["bound_inflated_by"] = factor
-            bl, bu = strip_bounds(y, b * factor)
-            res = interval_hull(W, bl, bu, lo, hi, scale=b * factor, center=theta)
-            if res.status != "ok" or np.any(res.lower > res.upper):
-                fallback("the hull LPs failed on a set known to be non-empty; the box is the prior")
-                res.lower, res.upper = lo.copy(), hi.copy()
-        else:
-            # a rigorous feasibility check of the mean of the 2p LP solutions proves S non-empty cheaply;
-            # failing that (S very thin or empty within the LP tolerance), the Chebyshev LP decides
-            x_mean = np.clip(res.points.mean(axis=1), lo, hi)
-            if scaled_residual_upper(W, y, b, x_mean) <= 1.0:
-                info["nonempty_proven"] = True
-                info["nearly_inconsistent"] = False
-            else:
-                check_consistency_by_lp()
+        if verdict is None:  # the mean of the LP solutions is a verified point of S
+            info["nonempty_proven"] = True
+            info["nearly_inconsistent"] = False
         if res.info["lp_failures"] or "lp_error" in res.info:
             failed = sorted({names[j % p] for j in res.info["lp_failures"]}) or "some parameters"
             fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "

@@ -72,9 +72,9 @@ from ident.estimators.estimate import (
     estimate,
     min_consistent_bound,
 )
-from ident.estimators.hull import _column_scale, power2_scale, safe_lower_bound, strip_bounds
+from ident.estimators.hull import strip_bounds
 from ident.numerics.interval import point_matvec, up
-from ident.numerics.lp import check, new_highs
+from ident.numerics.lp import check, column_scale, new_highs, power2_scale, safe_lower_bound
 
 __all__ = ["OutlierBudgetError", "OutlierRows", "detect_outliers", "relaxed_hull"]
 
@@ -264,7 +264,7 @@ class _BigM:
         self.xl = np.concatenate([lo, np.zeros(n), [0.0]])
         self.xu = np.concatenate([hi, np.ones(n), [self.s_max]])
         r = power2_scale(self.w)  # rows to units of their half-width first, then columns (units-invariant)
-        self.d = np.concatenate([_column_scale(W, r), np.ones(n + 1)])
+        self.d = np.concatenate([column_scale(W, r), np.ones(n + 1)])
         self.r = np.concatenate([r] * 2 + [np.ones(1)])
         self.lp_tol = lp_tol
 
