@@ -182,13 +182,15 @@ class LPSolution:
     """One solve of :class:`LPModel`: ``status`` 'optimal' or 'infeasible'; on 'optimal', ``x`` (n,) the
     solution in the model's original coordinates (float, unverified), ``z`` (n,) the same as a shift from the
     centre, ``duals`` (m,) the row duals of the ORIGINAL (unscaled) rows for the ORIGINAL cost (zeros when
-    HiGHS gives none), usable as the dual guess of :class:`SafeBound`; ``iterations`` the simplex iterations."""
+    HiGHS gives none, then ``dual_valid`` is False), usable as the dual guess of :class:`SafeBound`;
+    ``iterations`` the simplex iterations of this solve."""
 
     status: str
     x: np.ndarray | None = None
     z: np.ndarray | None = None
     duals: np.ndarray | None = None
     iterations: int = 0
+    dual_valid: bool = True
 
 
 class LPModel:
@@ -290,7 +292,8 @@ class LPModel:
         if rd.size != self.m:
             raise LPError(f"HiGHS returned {rd.size} row duals for {self.m} rows")
         z = np.asarray(sol.col_value) * self.d
-        return LPSolution("optimal", x=self.center + z, z=z, duals=rd * self.r * norm, iterations=it)
+        return LPSolution("optimal", x=self.center + z, z=z, duals=rd * self.r * norm, iterations=it,
+                          dual_valid=bool(sol.dual_valid))
 
 
 # ------------------------------------------------------------------------------------------ the safe bound
