@@ -254,6 +254,14 @@ class LPModel:
         check(self.highs.changeColsBounds(self.n, self._cols, (self.xl - self.center) / self.d,
                                           (self.xu - self.center) / self.d), "changeColsBounds")
 
+    def basis(self):
+        """HiGHS's current basis (to warm-start a later model of the same shape, :meth:`set_basis`)."""
+        return self.highs.getBasis()
+
+    def set_basis(self, basis) -> None:
+        """Start the next solve from ``basis`` (a :meth:`basis` of a model of the same shape)."""
+        check(self.highs.setBasis(basis), "setBasis")
+
     def set_cost(self, cost) -> None:
         """Set the objective ``min cost^T x`` (cost (n,) finite, not zero) without solving."""
         cd = np.asarray(cost, dtype=float) * self.d
