@@ -353,7 +353,7 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
     mip = None
     if highs_milp:
         mip = model.highs(integer=True)
-        mip.setOptionValue("time_limit", float(milp_time_limit))
+        check(mip.setOptionValue("time_limit", float(milp_time_limit)), "option time_limit")
     lp = model.highs(integer=False)
     ncol = p + n + 1
     all_cols = np.arange(ncol, dtype=np.int32)
@@ -368,11 +368,11 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
         cut = np.inf  # best objective of a point found in S_budget (float; steers the search only)
         hint: set = set()
         if mip is not None:  # HiGHS's own MILP solver: incumbent, hint and an independent value
-            mip.changeColsCost(ncol, all_cols, cost * model.d)
-            mip.run()
+            check(mip.changeColsCost(ncol, all_cols, cost * model.d), "changeColsCost (MILP)")
+            run_error = mip.run() == highspy.HighsStatus.kError  # no incumbent then: the search finds its own
             ms = mip.getModelStatus()
             sol = mip.getSolution()
-            if sol.value_valid and ms in (_OPTIMAL, highspy.HighsModelStatus.kTimeLimit):
+            if not run_error and sol.value_valid and ms in (_OPTIMAL, highspy.HighsModelStatus.kTimeLimit):
                 x = np.asarray(sol.col_value) * model.d
                 cut = float(cost[:p] @ x[:p])
                 hint = set(np.flatnonzero(x[p: p + n] > 0.5).tolist())
@@ -380,7 +380,7 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
             info["milp_status"].append(mip.modelStatusToString(ms))
         lp_cost = cost.copy()
         lp_cost[-1] = 1e4 * width[i]  # elastic penalty: any value keeps the bound valid; large makes it exact
-        lp.changeColsCost(ncol, all_cols, lp_cost * model.d)
+        check(lp.changeColsCost(ncol, all_cols, lp_cost * model.d), "changeColsCost")
         tau = 1e-7 * width[i] + 1e-300
         heap = [(-np.inf, 0, 0, (), ())]  # (parent's safe bound, -depth, tie, E, K)
         closed = np.inf  # min safe bound over closed leaves
@@ -398,7 +398,7 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
             xl, xu = model.xl.copy(), model.xu.copy()
             xl[p + np.array(E, dtype=np.int64)] = 1.0
             xu[p + np.array(K, dtype=np.int64)] = 0.0
-            lp.changeColsBounds(ncol, all_cols, xl / model.d, xu / model.d)
+            check(lp.changeColsBounds(ncol, all_cols, xl / model.d, xu / model.d), "changeColsBounds")
             run_error = lp.run() == highspy.HighsStatus.kError
             s = lp.getSolution()
             if run_error or lp.getModelStatus() != _OPTIMAL or not s.value_valid or not s.dual_valid:
