@@ -251,6 +251,7 @@ def interval_hull(
     duals: list = [(ws_idx[:0], np.zeros(0))] * n_lp
     failures: list[int] = []
     lp_error = None
+    pooled: dict = {}
 
     def add(rows):
         nonlocal ws_idx
@@ -273,11 +274,13 @@ def interval_hull(
             x_sol[:, j] = sol.x
             nz = sol.duals != 0.0  # duals of the original rows for the original cost +-e_i (any y is valid)
             duals[j] = (ws_idx[nz], sol.duals[nz])
-            cand = pool[~ws_mask[pool]]
-            if cand.size == 0:
+            if pooled.get("rows") is not pool:  # the pool's rows, gathered once per pool (not once per solve)
+                pooled.update(rows=pool, W=W[pool], m0=m0[pool], half=half[pool], inv=inv_unit[pool])
+            free = ~ws_mask[pool]
+            if not free.any():
                 return True
-            v = (np.abs(W[cand] @ sol.z - m0[cand]) - half[cand]) * inv_unit[cand]
-            new = _worst(v, cand, violation_tol, add_rows)
+            v = (np.abs(pooled["W"] @ sol.z - pooled["m0"]) - pooled["half"]) * pooled["inv"]
+            new = _worst(v[free], pool[free], violation_tol, add_rows)
             if new.size == 0:
                 return True
             add(new)
