@@ -177,6 +177,66 @@ def _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi):
     return lower, upper
 
 
+class _WorkingSet:
+    """The rows of one hull model under constraint generation: the strips in the model's shifted coordinates
+    (centres ``m0``, half-widths ``half``), the rows added so far (``idx``, in the model's order), the pool."""
+
+    def __init__(self, W, m0, half, unit, size, pool, model: LPModel) -> None:
+        self.W, self.m0, self.half, self.unit, self.size = W, m0, half, unit, size
+        self.inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
+        self.mask = np.zeros(W.shape[0], dtype=bool)
+        self.idx = pool[:0]
+        self.pool = pool
+        self.model = model
+        self._pooled: dict = {}
+
+    def add(self, rows) -> None:
+        self.model.add_shifted_rows(self.W[rows], self.m0[rows] - self.half[rows], self.m0[rows] + self.half[rows],
+                                    self.size[rows])
+        self.mask[rows] = True
+        self.idx = np.concatenate([self.idx, rows])
+
+    def solve(self, cost, max_rounds, violation_tol, add_rows):
+        """Solve ``min cost^T theta`` on the working set, adding the pool's worst violated rows and re-solving
+        until the pool is clean. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the
+        duals' rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
+        sol, rows = None, self.idx
+        for _ in range(max_rounds):
+            try:
+                sol, rows = self.model.solve(cost), self.idx
+            except LPError:
+                return None, rows
+            if sol.status == "infeasible":
+                return sol, rows
+            if self._pooled.get("rows") is not self.pool:  # the pool's rows, gathered once per pool
+                p = self.pool
+                self._pooled.update(rows=p, W=self.W[p], m0=self.m0[p], half=self.half[p], inv=self.inv_unit[p])
+            free = ~self.mask[self.pool]
+            if not free.any():
+                return sol, rows
+            pw = self._pooled
+            v = (np.abs(pw["W"] @ sol.z - pw["m0"]) - pw["half"]) * pw["inv"]
+            new = _worst(v[free], self.pool[free], violation_tol, add_rows)
+            if new.size == 0:
+                return sol, rows
+            self.add(new)
+        return sol, rows
+
+    def full_check(self, dx_cols, violation_tol, add_rows) -> list:
+        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (one blocked pass); add the worst
+        violated rows of each to the model and the pool. Returns, per column, the rows added for it."""
+        rows, dev = _violated_rows(self.W, dx_cols, self.m0, self.half + violation_tol * self.unit, self.mask)
+        if not rows.size:
+            return [rows] * dx_cols.shape[1]
+        v = (dev - self.half[rows, None]) * self.inv_unit[rows, None]
+        new = [_worst(v[:, col], rows, violation_tol, add_rows) for col in range(dx_cols.shape[1])]
+        if any(n.size for n in new):
+            added = np.unique(np.concatenate(new))
+            self.add(added)
+            self.pool = np.union1d(self.pool, added)
+        return new
+
+
 def interval_hull(
     W: np.ndarray,
     bl: np.ndarray,
@@ -231,90 +291,45 @@ def interval_hull(
     half = 0.5 * bu - 0.5 * bl
     mid = 0.5 * bl + 0.5 * bu
     unit = half if scale is None else np.asarray(scale, float)
-    inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
     size = unit if row_scale is None else np.asarray(row_scale, float)
 
     theta0 = 0.5 * (prior_lo + prior_hi) if center is None else np.asarray(center, float)
     theta0 = np.clip(np.where(np.isfinite(theta0), theta0, 0.5 * (prior_lo + prior_hi)), prior_lo, prior_hi)
     m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
     first, pool = _initial_sets(W, m0, half, initial_rows, pool_rows)
-    ws_mask = np.zeros(n_rows, dtype=bool)
-    ws_idx = first[:0]
-
     n_lp = 2 * p
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
     costs[p + np.arange(p), np.arange(p)] = -1.0  # LP p + i: min -theta_i = -max theta_i
-    order = list(range(p)) + [p + i for i in reversed(range(p))]
     x_sol = np.repeat(theta0[:, None], n_lp, axis=1)
     dx_sol = np.zeros((p, n_lp))
-    duals: list = [(ws_idx[:0], np.zeros(0))] * n_lp
+    duals: list = [(first[:0], np.zeros(0))] * n_lp
     failures: list[int] = []
-    lp_error = None
-    pooled: dict = {}
-
-    def add(rows):
-        nonlocal ws_idx
-        model.add_shifted_rows(W[rows], m0[rows] - half[rows], m0[rows] + half[rows], size[rows])
-        ws_mask[rows] = True
-        ws_idx = np.concatenate([ws_idx, rows])
-
-    def solve(j) -> bool:
-        """Solve LP j on the working set, refining against the pool; False if infeasible."""
-        for _ in range(max_rounds):
-            try:
-                sol = model.solve(costs[j])
-            except LPError:
-                failures.append(int(j))  # no usable duals: y = 0 keeps the endpoint at the prior
-                duals[j] = (ws_idx[:0], np.zeros(0))
-                return True
-            if sol.status == "infeasible":
-                return False
-            dx_sol[:, j] = sol.z
-            x_sol[:, j] = sol.x
-            nz = sol.duals != 0.0  # duals of the original rows for the original cost +-e_i (any y is valid)
-            duals[j] = (ws_idx[nz], sol.duals[nz])
-            if pooled.get("rows") is not pool:  # the pool's rows, gathered once per pool (not once per solve)
-                pooled.update(rows=pool, W=W[pool], m0=m0[pool], half=half[pool], inv=inv_unit[pool])
-            free = ~ws_mask[pool]
-            if not free.any():
-                return True
-            v = (np.abs(pooled["W"] @ sol.z - pooled["m0"]) - pooled["half"]) * pooled["inv"]
-            new = _worst(v[free], pool[free], violation_tol, add_rows)
-            if new.size == 0:
-                return True
-            add(new)
-        return True
-
-    rounds = 0
-    todo = list(order)
-    infeasible = False
-    model = None
+    lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
+    todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
         model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=column_scale(W, power2_scale(size)),
                         tolerance=lp_tol, **PRIMAL_SIMPLEX)
-        add(first)
-        while todo and rounds < max_rounds:
+        ws = _WorkingSet(W, m0, half, unit, size, pool, model)
+        ws.add(first)
+        while todo and rounds < max_rounds and not infeasible:
             rounds += 1
-            infeasible = not all(solve(j) for j in todo)
-            if infeasible:
-                break
-            # full check of the solutions just computed against all N rows
-            check_lps = np.array(todo)
-            todo = []
-            rows, dev = _violated_rows(W, dx_sol[:, check_lps], m0, half + violation_tol * unit, ws_mask)
-            if rows.size:
-                v = (dev - half[rows, None]) * inv_unit[rows, None]
-                new_rows = []
-                for col, j in enumerate(check_lps):
-                    new = _worst(v[:, col], rows, violation_tol, add_rows)
-                    if new.size:
-                        todo.append(int(j))
-                        new_rows.append(new)
-                if new_rows:
-                    new_rows = np.unique(np.concatenate(new_rows))
-                    add(new_rows)
-                    pool = np.union1d(pool, new_rows)
+            for j in todo:
+                sol, rows = ws.solve(costs[j], max_rounds, violation_tol, add_rows)
+                if sol is None:
+                    failures.append(int(j))  # no usable duals: y = 0 keeps the endpoint at the prior
+                    duals[j] = (first[:0], np.zeros(0))
+                    continue
+                if sol.status == "infeasible":
+                    infeasible = True
+                    break
+                dx_sol[:, j], x_sol[:, j] = sol.z, sol.x
+                nz = sol.duals != 0.0  # duals of the original rows for the original cost +-e_i (any y is valid)
+                duals[j] = (rows[nz], sol.duals[nz])
+            if not infeasible:  # full check of the solutions just computed against all N rows
+                check_lps = np.array(todo)
+                new = ws.full_check(dx_sol[:, check_lps], violation_tol, add_rows)
+                todo = [int(j) for j, rows in zip(check_lps, new) if rows.size]
     except LPError as exc:  # a model HiGHS rejects: the endpoints solved so far keep their (valid) duals
         lp_error = str(exc)
         infeasible = False
@@ -327,7 +342,7 @@ def interval_hull(
     info = {
         "lp_iterations": 0 if model is None else model.iterations,
         "lp_solves": 0 if model is None else model.solves,
-        "working_rows": int(ws_idx.size),
+        "working_rows": 0 if ws is None else int(ws.idx.size),
         "rounds": rounds,
         "lp_failures": sorted(set(failures)),
         "converged": not todo and lp_error is None,
