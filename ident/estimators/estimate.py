@@ -214,6 +214,41 @@ def _least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b
     return np.clip(sol, lo, hi)
 
 
+def _hull_box(W, y, b, scalar, strips, prior, center, names, info, fallback, check_consistency_by_lp):
+    """The hull method of :func:`estimate`: the hull LPs, emptiness decided and the set enclosed by
+    :func:`~ident.estimators.enclosure.decide_and_enclose`; records into ``info``, returns (lower, upper)."""
+    (bl, bu), (lo, hi) = strips, prior
+    p = W.shape[1]
+
+    def hull(factor, start):
+        if factor == 1.0:
+            return interval_hull(W, bl, bu, lo, hi, scale=b, center=start)
+        fbl, fbu = strip_bounds(y, b * factor)
+        return interval_hull(W, fbl, fbu, lo, hi, scale=b * factor, center=start)
+
+    def decide() -> Verdict:
+        ch = check_consistency_by_lp()  # raises when S is proven empty
+        if ch is None:  # nothing proven: the (rigorous, larger) scaled residual at the least-squares point
+            return Verdict(0.0, scaled_residual_upper(W, y, b, center), center, False)
+        return Verdict(ch.lower, ch.upper, ch.theta, True)
+
+    res, verdict, factor = decide_and_enclose(
+        hull, decide, lambda t: scaled_residual_upper(W, y, b, t),
+        lambda s_lo, s_up: _inconsistent(W, y, b, scalar, lo, hi, s_lo, center), fallback, center, lo, hi)
+    if factor is not None:
+        info["bound_inflated_by"] = factor
+    if verdict is None:  # the mean of the LP solutions is a verified point of S
+        info["nonempty_proven"] = True
+        info["nearly_inconsistent"] = False
+    if res.info["lp_failures"] or "lp_error" in res.info:
+        failed = sorted({names[j % p] for j in res.info["lp_failures"]}) or "some parameters"
+        fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
+                 "their endpoints are coarser safe bounds or the prior's")
+    lower, upper = res.lower, res.upper
+    info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "lp_failures", "converged")})
+    return lower, upper
+
+
 def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: bool = True) -> Box:
     """Guaranteed box enclosing ``S = {theta in prior : |y - W theta| <= bound}``.
 
@@ -276,32 +311,8 @@ def estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: boo
         return ch
 
     if method == "hull":
-        def hull(factor, start):
-            if factor == 1.0:
-                return interval_hull(W, bl, bu, lo, hi, scale=b, center=start)
-            fbl, fbu = strip_bounds(y, b * factor)
-            return interval_hull(W, fbl, fbu, lo, hi, scale=b * factor, center=start)
-
-        def decide() -> Verdict:
-            ch = check_consistency_by_lp()  # raises when S is proven empty
-            if ch is None:  # nothing proven: the (rigorous, larger) scaled residual at the least-squares point
-                return Verdict(0.0, scaled_residual_upper(W, y, b, center), center, False)
-            return Verdict(ch.lower, ch.upper, ch.theta, True)
-
-        res, verdict, factor = decide_and_enclose(
-            hull, decide, lambda t: scaled_residual_upper(W, y, b, t),
-            lambda s_lo, s_up: _inconsistent(W, y, b, scalar, lo, hi, s_lo, center), fallback, center, lo, hi)
-        if factor is not None:
-            info["bound_inflated_by"] = factor
-        if verdict is None:  # the mean of the LP solutions is a verified point of S
-            info["nonempty_proven"] = True
-            info["nearly_inconsistent"] = False
-        if res.info["lp_failures"] or "lp_error" in res.info:
-            failed = sorted({names[j % p] for j in res.info["lp_failures"]}) or "some parameters"
-            fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
-                     "their endpoints are coarser safe bounds or the prior's")
-        lower, upper = res.lower, res.upper
-        info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "lp_failures", "converged")})
+        lower, upper = _hull_box(W, y, b, scalar, (bl, bu), (lo, hi), center, names, info, fallback,
+                                 check_consistency_by_lp)
     else:
         res = cgsp(W, bl, bu, lo, hi)
         if res.empty:

@@ -263,11 +263,8 @@ def interval_hull(
     e.g. the bound b when the strip is one-sided); center : (p,) a point near the middle of the set (e.g.
     least squares), the origin of the LP's coordinates.
 
-    Scaling (units-invariant, :class:`~ident.numerics.lp.LPModel`): HiGHS sees ``z = (theta - center) / d``
-    and rows ``r_k W_k``, with ``r_k`` the power of two nearest ``1 / row_scale_k`` and then ``d_j`` the power
-    of two that brings column j of the row-scaled matrix to unit root-mean-square. Multiplying y, W and the
-    bounds of rows by a factor, or a column of W by a factor (the parameter's unit), changes the scaled model
-    only by powers of two; the shift keeps the row bounds of the size of the strips, however narrow.
+    Scaling (units-invariant, module docstring and :class:`~ident.numerics.lp.LPModel`): rows by the power of
+    two nearest ``1 / row_scale_k``, then columns to unit root-mean-square, shifted to ``center``.
 
     Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary; the
     nearest ``initial_rows`` form the first working set and the nearest ``pool_rows`` a candidate pool.
@@ -376,6 +373,41 @@ def scaled_residual_upper(W, y, w, theta):
     return best
 
 
+def _chebyshev_first_rows(e0, w, initial_rows: int) -> np.ndarray:
+    """(N,) mask of the Chebyshev LP's first working set: spread rows plus the rows of largest scaled residual
+    ``|e0| / w`` at the centre, ``initial_rows`` in all (every row when there are fewer)."""
+    n_rows = e0.size
+    ws_mask = np.zeros(n_rows, dtype=bool)
+    ws_mask[_spread_rows(n_rows, initial_rows // 4)] = True
+    if n_rows > initial_rows:
+        res = np.abs(e0) / w
+        res[ws_mask] = -np.inf
+        k = initial_rows - int(ws_mask.sum())
+        ws_mask[np.argpartition(-res, k - 1)[:k]] = True
+    else:
+        ws_mask[:] = True
+    return ws_mask
+
+
+def _chebyshev_rows(W, rhs, w, idx):
+    """The Chebyshev LP's rows of samples ``idx`` over ``(theta, s)``: ``W_k theta + w_k s >= rhs_k`` for each
+    k, then ``W_k theta - w_k s <= rhs_k`` for each k. Returns ``(A (2k, p + 1), lo (2k,), hi (2k,))``."""
+    A = np.vstack([np.hstack([W[idx], w[idx, None]]), np.hstack([W[idx], -w[idx, None]])])
+    lo = np.concatenate([rhs[idx], np.full(idx.size, -np.inf)])
+    hi = np.concatenate([np.full(idx.size, np.inf), rhs[idx]])
+    return A, lo, hi
+
+
+def _scaled_residuals(W, e0, w, dtheta) -> np.ndarray:
+    """``|e0 - W dtheta| / w`` (N,) block by block (float: steers the constraint generation only)."""
+    n_rows = W.shape[0]
+    out = np.empty(n_rows)
+    for b in range(0, n_rows, _CHUNK):
+        e = min(n_rows, b + _CHUNK)
+        out[b:e] = np.abs(e0[b:e] - W[b:e] @ dtheta) / w[b:e]
+    return out
+
+
 def chebyshev(
     W: np.ndarray,
     y: np.ndarray,
@@ -420,26 +452,11 @@ def chebyshev(
     cost = np.zeros(p + 1)
     cost[p] = 1.0
 
-    def rows_for(idx):
-        A_lo = np.hstack([W[idx], w[idx, None]])  # W theta + w s >= y
-        A_hi = np.hstack([W[idx], -w[idx, None]])  # W theta - w s <= y
-        return np.vstack([A_lo, A_hi])
-
     def add_model_rows(idx):
-        lo = np.concatenate([e0[idx], np.full(idx.size, -np.inf)])
-        hi = np.concatenate([np.full(idx.size, np.inf), e0[idx]])
-        model.add_shifted_rows(rows_for(idx), lo, hi, np.concatenate([w[idx], w[idx]]))
+        A, lo, hi = _chebyshev_rows(W, e0, w, idx)  # bounds shifted to the centre: e0 = y - W theta0
+        model.add_shifted_rows(A, lo, hi, np.concatenate([w[idx], w[idx]]))
 
-    ws_mask = np.zeros(n_rows, dtype=bool)
-    ws_mask[_spread_rows(n_rows, initial_rows // 4)] = True
-    if n_rows > initial_rows:
-        res = np.abs(e0) / w
-        res[ws_mask] = -np.inf
-        k = initial_rows - int(ws_mask.sum())
-        ws_mask[np.argpartition(-res, k - 1)[:k]] = True
-        del res
-    else:
-        ws_mask[:] = True
+    ws_mask = _chebyshev_first_rows(e0, w, initial_rows)
     ws_idx = np.flatnonzero(ws_mask)
     order = [ws_idx]
     add_model_rows(ws_idx)
@@ -450,11 +467,7 @@ def chebyshev(
         if sol.status != "optimal":
             raise LPError("HiGHS failed on the Chebyshev LP: infeasible (it always has a solution)")
         dtheta, s = sol.z[:p], sol.z[p]
-        # scaled residuals of all rows at theta, block by block
-        worst = np.empty(n_rows)
-        for b in range(0, n_rows, _CHUNK):
-            e = min(n_rows, b + _CHUNK)
-            worst[b:e] = np.abs(e0[b:e] - W[b:e] @ dtheta) / w[b:e]
+        worst = _scaled_residuals(W, e0, w, dtheta)
         worst[ws_mask] = -np.inf
         bad = np.flatnonzero(worst > s + violation_tol * max(s, 1e-300))
         if bad.size == 0 or rounds >= max_rounds:
@@ -467,9 +480,7 @@ def chebyshev(
 
     ws_all = np.concatenate(order)
     # HiGHS keeps the rows in insertion order: each block added the >= rows of the block, then its <= rows
-    A = np.vstack([rows_for(blk) for blk in order])
-    lo = np.concatenate([np.concatenate([y[blk], np.full(blk.size, -np.inf)]) for blk in order])
-    hi = np.concatenate([np.concatenate([np.full(blk.size, np.inf), y[blk]]) for blk in order])
+    A, lo, hi = (np.concatenate(part) for part in zip(*(_chebyshev_rows(W, y, w, blk) for blk in order)))
     rd = sol.duals  # the duals of the unscaled rows
     nz = rd != 0.0
     lower = shifted_safe_bound(A[nz], lo[nz], hi[nz], xl, xu, cost, rd[nz], x0)
