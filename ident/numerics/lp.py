@@ -248,6 +248,35 @@ class LPModel:
         add_dense_rows(self.highs, A * self.d * r[:, None], lo_shift * r, hi_shift * r)
         self.r = np.concatenate([self.r, r])
 
+    def add_sparse_rows(self, starts, index, values, lo, hi, row_scale=None) -> None:
+        """Append sparse rows ``lo <= A x <= hi`` in compressed row form (original coordinates): row i holds
+        the entries ``values[starts[i]:starts[i + 1]]`` in the columns ``index[...]`` (every row non-empty).
+
+        starts : (k,) int; index, values : (nnz,); lo, hi : (k,) (may be infinite); row_scale as in
+        :meth:`add_rows`. The bounds are shifted to the centre and each entry scaled by its row's power of
+        two and its column's scale. :class:`LPError` when an entry is not finite or ``>= LARGE_ENTRY``.
+        """
+        starts = np.asarray(starts, dtype=np.int64)
+        index = np.asarray(index, dtype=np.int32)
+        values = np.asarray(values, dtype=float)
+        k = starts.size
+        if k == 0:
+            return
+        counts = np.diff(np.append(starts, values.size))
+        if np.any(counts <= 0):
+            raise LPError("add_sparse_rows needs every row non-empty")
+        amax = float(np.max(np.abs(values)))
+        if not np.isfinite(amax) or amax >= LARGE_ENTRY:
+            raise LPError(f"rows with a matrix entry of magnitude {amax:.3g} (HiGHS accepts < {LARGE_ENTRY:.0e})")
+        r = np.ones(k) if row_scale is None else power2_scale(row_scale)
+        a0 = np.add.reduceat(values * self.center[index], starts)
+        lo_s = (np.asarray(lo, float) - a0) * r
+        hi_s = (np.asarray(hi, float) - a0) * r
+        scaled = values * self.d[index] * np.repeat(r, counts)
+        check(self.highs.addRows(k, lo_s, hi_s, values.size, starts.astype(np.int32), index, scaled),
+              f"addRows ({k} rows)")
+        self.r = np.concatenate([self.r, r])
+
     def set_bounds(self, xl, xu) -> None:
         """Change every column's bounds (original coordinates), e.g. a branch-and-bound node."""
         self.xl, self.xu = np.asarray(xl, dtype=float), np.asarray(xu, dtype=float)
@@ -262,12 +291,15 @@ class LPModel:
         """Start the next solve from ``basis`` (a :meth:`basis` of a model of the same shape)."""
         check(self.highs.setBasis(basis), "setBasis")
 
-    def set_cost(self, cost) -> None:
-        """Set the objective ``min cost^T x`` (cost (n,) finite, not zero) without solving."""
+    def set_cost(self, cost, *, normalize: bool = True) -> None:
+        """Set the objective ``min cost^T x`` (cost (n,) finite, not zero) without solving; HiGHS sees
+        ``cost d / max |cost d|`` (``cost d`` itself with ``normalize=False``)."""
         cd = np.asarray(cost, dtype=float) * self.d
         norm = float(np.max(np.abs(cd))) if cd.size else 0.0
         if norm == 0.0 or not np.isfinite(norm):
             raise LPError(f"cost must be finite and not zero, got max |cost d| = {norm!r}")
+        if not normalize:
+            norm = 1.0
         check(self.highs.changeColsCost(self.n, self._cols, cd / norm), "changeColsCost")
         self._norm = norm
 
