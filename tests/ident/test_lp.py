@@ -84,3 +84,49 @@ def test_status_errors_raised():
 def test_bad_input():
     with pytest.raises(ValueError, match="xl and xu"):
         LPModel(np.zeros(2), np.ones(3))
+
+
+def test_sparse_rows_and_bound_changes_against_linprog():
+    rng = np.random.default_rng(11)
+    m, n = 30, 6
+    A, lo, hi, xl, xu, x_star = _random_lp(rng, m, n)
+    A[rng.random(A.shape) < 0.5] = 0.0  # sparse
+    A[np.arange(m), rng.integers(0, n, m)] = 1.0  # every row non-empty
+    half = 10.0 ** rng.uniform(-3, 0, m) * (1.0 + np.abs(A @ x_star))
+    lo, hi = A @ x_star - half, A @ x_star + half  # x_star stays feasible
+    starts, index, values = [], [], []
+    for k in range(m):
+        starts.append(len(values))
+        nz = np.flatnonzero(A[k])
+        index.extend(nz.tolist())
+        values.extend(A[k, nz].tolist())
+    model = LPModel(xl, xu, center=x_star, col_scale=column_scale(A))
+    model.add_sparse_rows(np.array(starts), np.array(index), np.array(values), lo, hi, 0.5 * hi - 0.5 * lo)
+    c = rng.normal(size=n)
+    for shrink in (1.0, 0.5):  # the whole box, then a node of a branch and bound (bounds changed, warm start)
+        bl, bu = x_star - shrink * (x_star - xl), x_star + shrink * (xu - x_star)
+        model.set_bounds(bl, bu)
+        sol = model.solve(c)
+        ref = linprog(c, A_ub=np.vstack([A, -A]), b_ub=np.concatenate([hi, -lo]), bounds=list(zip(bl, bu)),
+                      method="highs")
+        scale = np.abs(c) @ (bu - bl)
+        assert sol.status == "optimal" and c @ sol.x == pytest.approx(ref.fun, abs=1e-7 * scale)
+        mu = safe_lower_bound(A, lo, hi, bl, bu, c, sol.duals)
+        assert mu <= ref.fun + 1e-12 * scale and mu == pytest.approx(ref.fun, abs=1e-6 * scale)
+    with pytest.raises(LPError, match="non-empty"):
+        model.add_sparse_rows(np.array([0, 0]), np.array([1]), np.array([1.0]), np.zeros(2), np.ones(2))
+
+
+def test_unnormalised_cost_gives_the_same_duals():
+    rng = np.random.default_rng(12)
+    A, lo, hi, xl, xu, x_star = _random_lp(rng, 25, 3)
+    c = rng.normal(size=3) * 100.0
+    duals = []
+    for normalize in (True, False):
+        model = LPModel(xl, xu, center=x_star)
+        model.add_rows(A, lo, hi)
+        model.set_cost(c, normalize=normalize)
+        sol = model.solve()
+        duals.append(sol.duals)
+        assert safe_lower_bound(A, lo, hi, xl, xu, c, sol.duals) <= c @ sol.x + 1e-9 * np.abs(c) @ (xu - xl)
+    np.testing.assert_allclose(duals[0], duals[1], rtol=1e-6, atol=1e-9 * np.max(np.abs(duals[0])))
