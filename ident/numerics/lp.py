@@ -13,11 +13,11 @@
   magnitude, leaving the model without those rows) raises :class:`LPError`. Callers turn it into a rigorous
   fallback (a coarser safe bound or the prior), never into a tighter box.
 * **One LP core.** :class:`LPModel` is the one HiGHS model of every linear program of the project (the
-  hull's 2p LPs and the Chebyshev fit, the Oettli-Prager LP, the online models, the prediction envelope, the
-  half-width LPs of the experiment design): rows added in dense blocks (constraint generation appends),
-  column bounds, costs, warm-started re-solves, every status checked, the scaling done once (a shift to a
-  centre, rows by powers of two nearest their size, columns by powers of two) and the duals returned for the
-  original rows and cost. :class:`SafeBound` (with :func:`safe_lower_bound`, :func:`safe_upper_bound`,
+  hull's 2p LPs and the Chebyshev fit, the Oettli-Prager LP, the online models, the big-M MILP and the
+  branch-and-bound LP, the prediction envelope, the half-width LPs of the experiment design): rows added in
+  dense or sparse blocks (constraint generation appends), column bounds, costs, warm-started re-solves, every
+  status checked, the scaling done once (a shift to a centre, rows by powers of two nearest their size,
+  columns by powers of two) and the duals returned for the original rows and cost. :class:`SafeBound` (with :func:`safe_lower_bound`, :func:`safe_upper_bound`,
   :func:`shifted_safe_bound`) turns any duals into a rigorous bound over a box (Neumaier & Shcherbina,
   Math. Program. 99, 2004), so neither the scaling nor the LP tolerances can affect rigour.
 """
