@@ -22,9 +22,9 @@ _LAZY = {
     "ident.robots.h4": ("EXTRA_NAMES", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS",
                         "inverse_dynamics", "parameter_names", "parameter_units", "regressor"),
     "ident.robots.serial": ("BaseParameters", "SerialRobot", "base_parameters"),
-    # the uncertain-regressor hull builds its interval regressor with the processing chain (scipy.signal)
-    "ident.estimators.uncertain": ("Distortion", "IntervalEquation", "interval_equation", "interval_regressor",
-                                   "uncertain_hull"),
+    # the H4 interval regressor (built with the processing chain) and the generic Oettli-Prager hull
+    "ident.robots.h4_interval": ("Distortion", "IntervalEquation", "interval_equation", "interval_regressor"),
+    "ident.estimators.uncertain": ("uncertain_hull",),
 }
 _LAZY_NAME = {name: module for module, names in _LAZY.items() for name in names}
 

@@ -151,10 +151,8 @@ def _layer_violations(layer: str, forbidden_project: tuple[str, ...], forbidden_
 
 
 PLOTTING = ("matplotlib", "rerun")
-#: known until the uncertain hull is split into its generic half (estimators) and the H4 interval regressor
-#: (robots), and the equation builder takes the regressor as an argument
-PENDING = {"ident.estimators.uncertain -> ident.processing.filtering",
-           "ident.processing.processing -> ident.robots.h4"}
+#: known until the equation builder takes the regressor as an argument
+PENDING = {"ident.processing.processing -> ident.robots.h4"}
 
 
 @pytest.mark.parametrize("layer", ["ident.estimators", "ident.numerics"])

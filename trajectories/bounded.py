@@ -33,11 +33,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import highspy
 import numpy as np
 
 import ident
-from ident.numerics.lp import new_highs
+from ident.numerics.lp import LPError, LPModel
 from ident.processing.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
 from trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem, grid_regressor
 
@@ -46,13 +45,6 @@ BIG = 1e6
 #: Default sharpness of the smooth maximum ``(1/beta) log sum exp(beta log(h_j / target_j))``: within
 #: ``log(p)/beta`` (here 0.33, a factor 1.4) of the true max of the log-ratios.
 BETA = 8.0
-
-_OPTIMAL = highspy.HighsModelStatus.kOptimal
-
-
-def _new_highs() -> highspy.Highs:
-    return new_highs(None, presolve="off")  # silent: HiGHS's banner never reaches stdout
-
 
 @dataclass(frozen=True)
 class HalfWidths:
@@ -87,7 +79,8 @@ def halfwidths(W, bases=None) -> HalfWidths:
     bases : optional p HiGHS bases of a previous call on a W with the same shape: LP j starts from bases[j]
     (else from the previous LP's optimal basis).
 
-    Raises ValueError for a W that is not a finite 2-D array with at least one row.
+    Raises ValueError for a W that is not a finite 2-D array with at least one row, :class:`ident.LPError` when
+    HiGHS does not solve an LP (every status is checked, :class:`ident.numerics.lp.LPModel`).
     """
     W = np.asarray(W, dtype=float)
     if W.ndim != 2 or W.shape[0] == 0 or W.shape[1] == 0:
@@ -95,35 +88,24 @@ def halfwidths(W, bases=None) -> HalfWidths:
     if not np.all(np.isfinite(W)):
         raise ValueError("W must be finite")
     m, p = W.shape
-    h = _new_highs()
-    lp = highspy.HighsLp()
-    lp.num_col_, lp.num_row_ = p, m
-    lp.col_cost_ = np.zeros(p)
-    lp.col_lower_, lp.col_upper_ = np.full(p, -BIG), np.full(p, BIG)
-    lp.row_lower_, lp.row_upper_ = -np.ones(m), np.ones(m)
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = np.arange(0, m * p + 1, m, dtype=np.int32)
-    lp.a_matrix_.index_ = np.tile(np.arange(m, dtype=np.int32), p)
-    lp.a_matrix_.value_ = np.ascontiguousarray(W.T).ravel()
-    h.passModel(lp)
-    cols = np.arange(p, dtype=np.int32)
+    model = LPModel(np.full(p, -BIG), np.full(p, BIG), center=np.zeros(p), tolerance=None)
+    model.add_rows(W, -np.ones(m), np.ones(m))
     out_h, delta, duals, iters, out_bases = np.empty(p), np.zeros((p, p)), np.zeros((p, m)), 0, []
     use_bases = bases is not None and len(bases) == p
     for j in range(p):
         cost = np.zeros(p)
         cost[j] = -1.0
-        h.changeColsCost(p, cols, cost)
         if use_bases:
-            h.setBasis(bases[j])
-        h.run()
-        iters += int(h.getInfo().simplex_iteration_count)
-        if h.getModelStatus() != _OPTIMAL:
-            raise RuntimeError(f"half-width LP {j} not solved: {h.modelStatusToString(h.getModelStatus())}")
-        sol = h.getSolution()
-        delta[j] = np.asarray(sol.col_value)
-        duals[j] = np.asarray(sol.row_dual)
+            model.set_cost(cost)
+            model.set_basis(bases[j])
+        sol = model.solve(None if use_bases else cost)  # ident.LPError unless optimal or infeasible
+        iters += sol.iterations
+        if sol.status != "optimal":
+            raise LPError(f"half-width LP {j} not solved: {sol.status}")
+        delta[j] = sol.x
+        duals[j] = sol.duals
         out_h[j] = delta[j, j]
-        out_bases.append(h.getBasis())
+        out_bases.append(model.basis())
     # HiGHS's sign convention: c = W^T y + z. Flip if a build uses the opposite one (checked, not assumed).
     ref = duals @ W  # (p, p), should be -I
     if np.allclose(ref, np.eye(p), atol=1e-6):
@@ -233,7 +215,7 @@ class HalfwidthProblem(CoefficientProblem):
         same_rows = self.last is not None and self._last_keep is not None and np.array_equal(self._last_keep, keep)
         try:
             hw = halfwidths(W, self.last.bases if same_rows else None)
-        except RuntimeError:
+        except LPError:
             return None
         if np.any(hw.h >= 0.5 * BIG) or np.any(hw.h <= 0):
             return None

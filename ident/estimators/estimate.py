@@ -27,6 +27,7 @@ from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, Unid
 from ident.estimators import registry
 from ident.estimators.cgsp import cgsp
 from ident.estimators.checks import check_bound, check_prior, check_W_y
+from ident.estimators.enclosure import Verdict, decide_and_enclose
 from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
 
 __all__ = [
@@ -143,6 +144,41 @@ def least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=
     return np.clip(sol, lo, hi)
 
 
+def _hull_box(W, y, b, scalar, strips, prior, center, names, info, fallback, check_consistency_by_lp):
+    """The hull method of :func:`estimate`: the hull LPs, emptiness decided and the set enclosed by
+    :func:`~ident.estimators.enclosure.decide_and_enclose`; records into ``info``, returns (lower, upper)."""
+    (bl, bu), (lo, hi) = strips, prior
+    p = W.shape[1]
+
+    def hull(factor, start):
+        if factor == 1.0:
+            return interval_hull(W, bl, bu, lo, hi, scale=b, center=start)
+        fbl, fbu = strip_bounds(y, b * factor)
+        return interval_hull(W, fbl, fbu, lo, hi, scale=b * factor, center=start)
+
+    def decide() -> Verdict:
+        ch = check_consistency_by_lp()  # raises when S is proven empty
+        if ch is None:  # nothing proven: the (rigorous, larger) scaled residual at the least-squares point
+            return Verdict(0.0, scaled_residual_upper(W, y, b, center), center, False)
+        return Verdict(ch.lower, ch.upper, ch.theta, True)
+
+    res, verdict, factor = decide_and_enclose(
+        hull, decide, lambda t: scaled_residual_upper(W, y, b, t),
+        lambda s_lo, s_up: _inconsistent(W, y, b, scalar, lo, hi, s_lo, center), fallback, center, lo, hi)
+    if factor is not None:
+        info["bound_inflated_by"] = factor
+    if verdict is None:  # the mean of the LP solutions is a verified point of S
+        info["nonempty_proven"] = True
+        info["nearly_inconsistent"] = False
+    if res.info["lp_failures"] or "lp_error" in res.info:
+        failed = sorted({names[j % p] for j in res.info["lp_failures"]}) or "some parameters"
+        fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
+                 "their endpoints are coarser safe bounds or the prior's")
+    lower, upper = res.lower, res.upper
+    info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "lp_failures", "converged")})
+    return lower, upper
+
+
 def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consistency: bool = True) -> Box:
     """The built-in estimators ``"hull"`` and ``"cgsp"``: a guaranteed box enclosing ``S = {theta in prior : |y - W theta| <= bound}``.
 
@@ -205,38 +241,8 @@ def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consist
         return ch
 
     if method == "hull":
-        res = interval_hull(W, bl, bu, lo, hi, scale=b, center=center)
-        crossed = res.status == "ok" and bool(np.any(res.lower > res.upper))  # rigorous: S is empty
-        if res.status == "infeasible" or crossed:
-            ch = check_consistency_by_lp()
-            if ch is None and crossed:
-                raise _inconsistent(W, y, b, scalar, lo, hi, 1.0, center)
-            # not proven empty: HiGHS's verdict is within its tolerance. Enclose S in the slightly larger
-            # S' (bounds scaled by > max(s_upper, 1)), which is non-empty: still an outer box of S. Without
-            # the Chebyshev LP, s_upper is the (rigorous, larger) scaled residual at the least-squares point.
-            s_up, theta = (ch.upper, ch.theta) if ch is not None else (scaled_residual_upper(W, y, b, center), center)
-            factor = max(s_up, 1.0) * (1.0 + 1e-9)
-            info["bound_inflated_by"] = factor
-            bl, bu = strip_bounds(y, b * factor)
-            res = interval_hull(W, bl, bu, lo, hi, scale=b * factor, center=theta)
-            if res.status != "ok" or np.any(res.lower > res.upper):
-                fallback("the hull LPs failed on a set known to be non-empty; the box is the prior")
-                res.lower, res.upper = lo.copy(), hi.copy()
-        else:
-            # a rigorous feasibility check of the mean of the 2p LP solutions proves S non-empty cheaply;
-            # failing that (S very thin or empty within the LP tolerance), the Chebyshev LP decides
-            x_mean = np.clip(res.points.mean(axis=1), lo, hi)
-            if scaled_residual_upper(W, y, b, x_mean) <= 1.0:
-                info["nonempty_proven"] = True
-                info["nearly_inconsistent"] = False
-            else:
-                check_consistency_by_lp()
-        if res.info["lp_failures"] or "lp_error" in res.info:
-            failed = sorted({names[j % p] for j in res.info["lp_failures"]}) or "some parameters"
-            fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
-                     "their endpoints are coarser safe bounds or the prior's")
-        lower, upper = res.lower, res.upper
-        info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "lp_failures", "converged")})
+        lower, upper = _hull_box(W, y, b, scalar, (bl, bu), (lo, hi), center, names, info, fallback,
+                                 check_consistency_by_lp)
     else:
         res = cgsp(W, bl, bu, lo, hi)
         if res.empty:

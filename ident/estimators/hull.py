@@ -39,11 +39,18 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import highspy
 import numpy as np
 
-from ident.numerics.interval import down, mid_rad, mul, point_matmul, sub, sum_down, up
-from ident.numerics.lp import LPError, add_dense_rows, check, new_highs
+from ident.numerics.interval import down, mid_rad, point_matmul, up
+from ident.numerics.lp import (
+    LPError,
+    LPModel,
+    SafeBound,
+    column_scale,
+    power2_scale,
+    safe_lower_bound,
+    shifted_safe_bound,
+)
 
 __all__ = [
     "ChebyshevResult",
@@ -66,110 +73,6 @@ def strip_bounds(y: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return down(y - bound), up(y + bound)
 
 
-class SafeBound:
-    """Neumaier-Shcherbina lower bound of ``min c^T x  s.t.  bl <= A x <= bu`` for a dual guess ``y``, to be
-    evaluated over one or more column boxes (:meth:`over`), optionally around a float point ``x0``.
-
-    A : (m, n) float; bl, bu : (m,) (may be -inf / +inf); c : (n,); y : (m,); x0 : (n,) or None.
-    Neumaier & Shcherbina (2004): for every feasible x, ``c^T x = y^T A x - r^T x`` with ``r = A^T y - c``,
-    and each term is bounded below over its box. Entries of ``y`` that would multiply an infinite row
-    bound are set to zero first (any ``y`` is allowed). ``r`` is enclosed with rigorous dot-product error
-    bounds and every product and the final sum are rounded downward. The row terms and ``r`` do not depend on
-    the box, so a second box (e.g. a box already proven to enclose the set) costs only ``n`` products.
-
-    With ``x0``: ``x = x0 + z``, ``bl - A x0 <= A z <= bu - A x0`` (``A x0`` enclosed, bounds rounded outward),
-    ``z in [xl - x0, xu - x0]`` (rounded outward) and ``c^T x = c^T x0 + c^T z`` (bounded below). The terms
-    are then of the size of the strips rather than of ``|y| |bl|``, which keeps the bound tight when the
-    strips are narrow (bounds of 1e-13 relative).
-    """
-
-    def __init__(self, A, bl, bu, c, y, x0=None) -> None:
-        A = np.asarray(A, dtype=float)
-        bl = np.asarray(bl, dtype=float)
-        bu = np.asarray(bu, dtype=float)
-        c = np.asarray(c, dtype=float)
-        y = np.array(y, dtype=float)
-        self.x0 = None if x0 is None else np.asarray(x0, dtype=float)
-        self.cx0 = 0.0
-        if self.x0 is not None:
-            if A.shape[0]:
-                alo, ahi = point_matmul(A, self.x0)
-                bl = np.where(np.isneginf(bl), -np.inf, down(bl - ahi))
-                bu = np.where(np.isposinf(bu), np.inf, up(bu - alo))
-            self.cx0 = float(sum_down(down(c * self.x0)))  # each product rounded down, then the sum
-        y[np.isneginf(bl) & (y > 0)] = 0.0  # y_i > 0 pairs with bl_i, y_i < 0 with bu_i
-        y[np.isposinf(bu) & (y < 0)] = 0.0
-        y[~np.isfinite(y)] = 0.0
-        keep = y != 0.0
-        A, bl, bu, y = A[keep], bl[keep], bu[keep], y[keep]
-        # rows: min(y bl, y bu) = y bl if y > 0 else y bu; one product, rounded down
-        self.rows = down(np.where(y > 0, y * np.where(y > 0, bl, 0.0), y * np.where(y < 0, bu, 0.0)))
-        # r = A^T y - c, enclosed
-        if A.shape[0]:
-            glo, ghi = point_matmul(A.T, y)
-        else:
-            glo = ghi = np.zeros_like(c)
-        self.rlo, self.rhi = sub(glo, ghi, c, c)
-
-    def over(self, xl, xu) -> float:
-        """The bound over the column box ``[xl, xu]`` (finite)."""
-        xl = np.asarray(xl, dtype=float)
-        xu = np.asarray(xu, dtype=float)
-        if not (np.all(np.isfinite(xl)) and np.all(np.isfinite(xu))):
-            raise ValueError("safe_lower_bound needs finite column bounds xl, xu")
-        if self.x0 is not None:
-            xl, xu = down(xl - self.x0), up(xu - self.x0)
-        # min over r in [rlo, rhi], x in [xl, xu] of -r x: bilinear, attained at a corner
-        plo, _ = mul(-self.rhi, -self.rlo, xl, xu)
-        mu = float(sum_down(np.concatenate([self.rows, plo])))
-        return mu if self.x0 is None else float(down(mu + self.cx0))
-
-
-def safe_lower_bound(A, bl, bu, xl, xu, c, y) -> float:
-    """Rigorous lower bound of ``min c^T x  s.t.  bl <= A x <= bu, xl <= x <= xu`` for any dual guess ``y``.
-
-    A : (m, n) float; bl, bu : (m,) (may be -inf / +inf); xl, xu : (n,) finite; c : (n,); y : (m,).
-    See :class:`SafeBound` (Neumaier & Shcherbina 2004).
-    """
-    return SafeBound(A, bl, bu, c, y).over(xl, xu)
-
-
-def shifted_safe_bound(A, bl, bu, xl, xu, c, y, x0) -> float:
-    """:func:`safe_lower_bound` evaluated around a float point ``x0`` (same guarantee, smaller rounding;
-    see :class:`SafeBound`)."""
-    return SafeBound(A, bl, bu, c, y, x0).over(xl, xu)
-
-
-def power2_scale(v: np.ndarray) -> np.ndarray:
-    """Powers of two ``2^-round(log2 v)`` (1 where v is 0): multiplying by them is exact barring underflow."""
-    v = np.asarray(v, dtype=float)
-    if v.size > 1 and v.ndim == 1 and v[0] > 0 and np.all(v == v[0]):  # one value (a scalar bound): one log
-        return np.full(v.shape, float(np.ldexp(1.0, -int(np.rint(np.log2(v[0]))))))
-    out = np.ones_like(v)
-    pos = v > 0
-    out[pos] = np.ldexp(1.0, -np.rint(np.log2(v[pos])).astype(int))
-    return out
-
-
-def _column_scale(W: np.ndarray, row_scale: np.ndarray | None = None) -> np.ndarray:
-    """Power-of-two column scales bringing each column of ``diag(row_scale) W`` to a root-mean-square of about 1.
-
-    row_scale : (N,) the row factors HiGHS sees (default 1). Computed on the row-scaled matrix, so that the
-    scaled model does not depend on the units of y (rows) nor of the parameters (columns), up to the powers of
-    two. One blocked pass over W.
-    """
-    common = 1.0
-    if row_scale is not None and row_scale.size and np.all(row_scale == row_scale[0]):
-        common, row_scale = float(row_scale[0]), None  # one factor for all rows (a power of two): exact
-    ss = np.zeros(W.shape[1])
-    for s in range(0, W.shape[0], _CHUNK):
-        blk = W[s : s + _CHUNK]
-        if row_scale is not None:
-            blk = blk * row_scale[s : s + _CHUNK, None]
-        ss += np.einsum("ij,ij->j", blk, blk)
-    return power2_scale(np.sqrt(ss / max(W.shape[0], 1)) * common)
-
-
 def _matvec(W: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``W @ x`` block by block (float)."""
     out = np.empty(W.shape[0])
@@ -184,20 +87,9 @@ def _spread_rows(n_rows: int, m: int) -> np.ndarray:
     return np.unique(np.linspace(0, n_rows - 1, m).round().astype(np.int64))
 
 
-def _new_highs(tolerance: float) -> highspy.Highs:
-    # primal simplex: after an objective change the previous optimal basis stays primal feasible
-    # (measured: about 15 % fewer iterations than HiGHS's default choice on the 2p hull LPs)
-    return new_highs(tolerance, presolve="off", simplex_strategy=4)
-
-
-def _add_dense_rows(h: highspy.Highs, A: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
-    add_dense_rows(h, A, lo, hi)
-
-
-_OPTIMAL = highspy.HighsModelStatus.kOptimal
-_INFEASIBLE = highspy.HighsModelStatus.kInfeasible
-_ERROR = highspy.HighsStatus.kError
-_ERROR_MODEL = highspy.HighsModelStatus.kSolveError
+#: HiGHS options of the hull's models: primal simplex, since after an objective change the previous optimal
+#: basis stays primal feasible (measured: about 15 % fewer iterations than HiGHS's default on the 2p hull LPs)
+PRIMAL_SIMPLEX = {"presolve": "off", "simplex_strategy": 4}
 
 
 @dataclass
@@ -236,6 +128,115 @@ def _violated_rows(W, dx_cols, m0, thr, skip):
     return np.concatenate(rows), np.vstack(devs)
 
 
+def _initial_sets(W, m0, half, initial_rows, pool_rows):
+    """The first working set and the candidate pool (sorted): rows ranked by the distance of the centre to
+    their strip boundary (slack / row norm), the nearest ``initial_rows`` plus ``2p`` spread rows, and the
+    nearest ``pool_rows``."""
+    n_rows, p = W.shape
+    n_pool = min(n_rows, max(pool_rows, initial_rows))
+    if n_pool < n_rows:
+        dist = np.abs(m0) - half
+        dist /= np.sqrt(np.einsum("ij,ij->i", W, W)) + 1e-300
+        pool = np.argpartition(-dist, n_pool - 1)[:n_pool]
+        pool = pool[np.argsort(-dist[pool])]
+        del dist
+    else:
+        pool = np.arange(n_rows)
+    first = pool[: min(initial_rows, pool.size)]
+    first = np.union1d(first, _spread_rows(n_rows, 2 * p))
+    return first, np.sort(pool)
+
+
+def _worst(v, candidates, violation_tol, add_rows):
+    """Up to ``add_rows`` candidates whose scaled violation ``v`` exceeds ``violation_tol``, the worst first."""
+    bad = v > violation_tol
+    if not bad.any():
+        return candidates[:0]
+    idx, v = candidates[bad], v[bad]
+    if idx.size > add_rows:
+        idx = idx[np.argpartition(-v, add_rows - 1)[:add_rows]]
+    return idx
+
+
+def _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi):
+    """The 2p safe bounds (LP j < p: lower of theta_j; LP p + j: upper) over the prior, then once more over the
+    box they give (it encloses the set, so the bound stays valid and the residual costs only that box)."""
+    p = prior_lo.size
+    lower, upper = prior_lo.copy(), prior_hi.copy()
+    bounds = [SafeBound(W[rows], bl[rows], bu[rows], costs[j], yd, theta0) for j, (rows, yd) in enumerate(duals)]
+    for refine in (False, True):
+        if refine and np.any(lower > upper):
+            break  # the set is proven empty: no box to refine over
+        box_lo, box_hi = (lower.copy(), upper.copy()) if refine else (prior_lo, prior_hi)
+        for j in range(2 * p):
+            mu = bounds[j].over(box_lo, box_hi)
+            if j < p:
+                lower[j] = max(lower[j], mu)
+            else:
+                upper[j - p] = min(upper[j - p], -mu)
+    return lower, upper
+
+
+class _WorkingSet:
+    """The rows of one hull model under constraint generation: the strips in the model's shifted coordinates
+    (centres ``m0``, half-widths ``half``), the rows added so far (``idx``, in the model's order), the pool."""
+
+    def __init__(self, W, m0, half, unit, size, pool, model: LPModel) -> None:
+        self.W, self.m0, self.half, self.unit, self.size = W, m0, half, unit, size
+        self.inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
+        self.mask = np.zeros(W.shape[0], dtype=bool)
+        self.idx = pool[:0]
+        self.pool = pool
+        self.model = model
+        self._pooled: dict = {}
+
+    def add(self, rows) -> None:
+        self.model.add_shifted_rows(self.W[rows], self.m0[rows] - self.half[rows], self.m0[rows] + self.half[rows],
+                                    self.size[rows])
+        self.mask[rows] = True
+        self.idx = np.concatenate([self.idx, rows])
+
+    def solve(self, cost, max_rounds, violation_tol, add_rows):
+        """Solve ``min cost^T theta`` on the working set, adding the pool's worst violated rows and re-solving
+        until the pool is clean. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the
+        duals' rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
+        sol, rows = None, self.idx
+        for _ in range(max_rounds):
+            try:
+                sol, rows = self.model.solve(cost), self.idx
+            except LPError:
+                return None, rows
+            if sol.status == "infeasible":
+                return sol, rows
+            if self._pooled.get("rows") is not self.pool:  # the pool's rows, gathered once per pool
+                p = self.pool
+                self._pooled.update(rows=p, W=self.W[p], m0=self.m0[p], half=self.half[p], inv=self.inv_unit[p])
+            free = ~self.mask[self.pool]
+            if not free.any():
+                return sol, rows
+            pw = self._pooled
+            v = (np.abs(pw["W"] @ sol.z - pw["m0"]) - pw["half"]) * pw["inv"]
+            new = _worst(v[free], self.pool[free], violation_tol, add_rows)
+            if new.size == 0:
+                return sol, rows
+            self.add(new)
+        return sol, rows
+
+    def full_check(self, dx_cols, violation_tol, add_rows) -> list:
+        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (one blocked pass); add the worst
+        violated rows of each to the model and the pool. Returns, per column, the rows added for it."""
+        rows, dev = _violated_rows(self.W, dx_cols, self.m0, self.half + violation_tol * self.unit, self.mask)
+        if not rows.size:
+            return [rows] * dx_cols.shape[1]
+        v = (dev - self.half[rows, None]) * self.inv_unit[rows, None]
+        new = [_worst(v[:, col], rows, violation_tol, add_rows) for col in range(dx_cols.shape[1])]
+        if any(n.size for n in new):
+            added = np.unique(np.concatenate(new))
+            self.add(added)
+            self.pool = np.union1d(self.pool, added)
+        return new
+
+
 def interval_hull(
     W: np.ndarray,
     bl: np.ndarray,
@@ -262,11 +263,8 @@ def interval_hull(
     e.g. the bound b when the strip is one-sided); center : (p,) a point near the middle of the set (e.g.
     least squares), the origin of the LP's coordinates.
 
-    Scaling (units-invariant): HiGHS sees ``z = (theta - center) / d`` and rows ``r_k W_k``, with ``r_k`` the
-    power of two nearest ``1 / row_scale_k`` and then ``d_j`` the power of two that brings column j of the
-    row-scaled matrix to unit root-mean-square. Multiplying y, W and the bounds of rows by a factor, or a
-    column of W by a factor (the parameter's unit), changes the scaled model only by powers of two; the shift
-    keeps the row bounds of the size of the strips, however narrow.
+    Scaling (units-invariant, module docstring and :class:`~ident.numerics.lp.LPModel`): rows by the power of
+    two nearest ``1 / row_scale_k``, then columns to unit root-mean-square, shifted to ``center``.
 
     Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary; the
     nearest ``initial_rows`` form the first working set and the nearest ``pool_rows`` a candidate pool.
@@ -279,10 +277,9 @@ def interval_hull(
     Inputs are assumed validated (finite, ``bl <= bu``, ``prior_lo <= prior_hi``). Returns a
     :class:`HullResult`; ``status == 'infeasible'`` when HiGHS found a working set infeasible (the caller
     proves emptiness with :func:`chebyshev`). Every endpoint is a safe dual bound (module docstring),
-    evaluated around ``center`` and then once more over the box just found (which encloses the set, so the
-    bound stays valid and the dual's residual costs only that box's width), clipped to the prior. An LP that
-    HiGHS cannot solve (or a model it rejects) keeps its endpoint at the prior and is listed in
-    ``info['lp_failures']`` (``info['lp_error']`` holds the message of a rejected model).
+    evaluated around ``center`` and then once more over the box just found, clipped to the prior. An LP that
+    HiGHS cannot solve keeps its endpoint at the prior and is listed in ``info['lp_failures']`` (a model it
+    rejects also sets ``info['lp_error']``, the message).
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
@@ -291,153 +288,58 @@ def interval_hull(
     half = 0.5 * bu - 0.5 * bl
     mid = 0.5 * bl + 0.5 * bu
     unit = half if scale is None else np.asarray(scale, float)
-    inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
-    r = power2_scale(unit if row_scale is None else np.asarray(row_scale, float))
+    size = unit if row_scale is None else np.asarray(row_scale, float)
 
     theta0 = 0.5 * (prior_lo + prior_hi) if center is None else np.asarray(center, float)
     theta0 = np.clip(np.where(np.isfinite(theta0), theta0, 0.5 * (prior_lo + prior_hi)), prior_lo, prior_hi)
     m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
-
-    # rank rows by the distance of the centre to their strip boundary (slack / row norm)
-    n_pool = min(n_rows, max(pool_rows, initial_rows))
-    if n_pool < n_rows:
-        dist = np.abs(m0) - half
-        dist /= np.sqrt(np.einsum("ij,ij->i", W, W)) + 1e-300
-        pool = np.argpartition(-dist, n_pool - 1)[:n_pool]
-        pool = pool[np.argsort(-dist[pool])]
-        del dist
-    else:
-        pool = np.arange(n_rows)
-    ws_mask = np.zeros(n_rows, dtype=bool)
-    first = pool[: min(initial_rows, pool.size)]
-    first = np.union1d(first, _spread_rows(n_rows, 2 * p))
-    ws_mask[first] = True
-    ws_idx = first[:0]
-    pool = np.sort(pool)
-
-    d = _column_scale(W, r)
+    first, pool = _initial_sets(W, m0, half, initial_rows, pool_rows)
     n_lp = 2 * p
     costs = np.zeros((n_lp, p))
-    order = []
-    for i in range(p):
-        costs[i, i] = 1.0  # LP i: min theta_i
-        costs[p + i, i] = -1.0  # LP p + i: min -theta_i = -max theta_i
-        order.append(i)
-    order += [p + i for i in reversed(range(p))]
+    costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
+    costs[p + np.arange(p), np.arange(p)] = -1.0  # LP p + i: min -theta_i = -max theta_i
     x_sol = np.repeat(theta0[:, None], n_lp, axis=1)
     dx_sol = np.zeros((p, n_lp))
-    duals: list = [(ws_idx[:0], np.zeros(0))] * n_lp
+    duals: list = [(first[:0], np.zeros(0))] * n_lp
     failures: list[int] = []
-    counters = {"iterations": 0, "solves": 0}
-    infeasible = False
-    lp_error = None
-    cols = np.arange(p, dtype=np.int32)
-
-    def add(rows):
-        nonlocal ws_idx
-        rr = r[rows]
-        add_dense_rows(h, W[rows] * d * rr[:, None], (m0[rows] - half[rows]) * rr, (m0[rows] + half[rows]) * rr)
-        ws_mask[rows] = True
-        ws_idx = np.concatenate([ws_idx, rows])
-
-    def worst(v, candidates):
-        bad = v > violation_tol
-        if not bad.any():
-            return candidates[:0]
-        idx, v = candidates[bad], v[bad]
-        if idx.size > add_rows:
-            sel = np.argpartition(-v, add_rows - 1)[:add_rows]
-            idx = idx[sel]
-        return idx
-
-    def solve(j) -> bool:
-        """Solve LP j on the working set, refining against the pool; False if infeasible."""
-        for _ in range(max_rounds):
-            check(h.changeColsCost(p, cols, costs[j]), "changeColsCost")
-            run_error = h.run() == _ERROR
-            counters["iterations"] += int(h.getInfo().simplex_iteration_count)
-            counters["solves"] += 1
-            ms = _ERROR_MODEL if run_error else h.getModelStatus()
-            if ms == _INFEASIBLE:
-                return False
-            sol = h.getSolution()
-            if ms != _OPTIMAL or not sol.value_valid or len(sol.col_value) != p:
-                failures.append(int(j))  # no usable duals: y = 0 keeps the endpoint at the prior
-                duals[j] = (ws_idx[:0], np.zeros(0))
-                return True
-            dx = np.asarray(sol.col_value) * d
-            dx_sol[:, j] = dx
-            x_sol[:, j] = theta0 + dx
-            rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(ws_idx.size)
-            if rd.size != ws_idx.size:
-                raise LPError(f"HiGHS returned {rd.size} row duals for {ws_idx.size} rows")
-            nz = rd != 0.0
-            # duals of the original rows for the original cost +-e_i: y_k = d_i r_k y'_k (any y is valid)
-            duals[j] = (ws_idx[nz], rd[nz] * r[ws_idx[nz]] * d[j % p])
-            cand = pool[~ws_mask[pool]]
-            if cand.size == 0:
-                return True
-            v = (np.abs(W[cand] @ dx - m0[cand]) - half[cand]) * inv_unit[cand]
-            new = worst(v, cand)
-            if new.size == 0:
-                return True
-            add(new)
-        return True
-
-    rounds = 0
-    todo = list(order)
+    lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
+    todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
-        h = _new_highs(lp_tol)
-        check(h.addVars(p, (prior_lo - theta0) / d, (prior_hi - theta0) / d), "addVars")
-        add(first)
-        while todo and rounds < max_rounds:
+        model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=column_scale(W, power2_scale(size)),
+                        tolerance=lp_tol, **PRIMAL_SIMPLEX)
+        ws = _WorkingSet(W, m0, half, unit, size, pool, model)
+        ws.add(first)
+        while todo and rounds < max_rounds and not infeasible:
             rounds += 1
             for j in todo:
-                if not solve(j):
+                sol, rows = ws.solve(costs[j], max_rounds, violation_tol, add_rows)
+                if sol is None:
+                    failures.append(int(j))  # no usable duals: y = 0 keeps the endpoint at the prior
+                    duals[j] = (first[:0], np.zeros(0))
+                    continue
+                if sol.status == "infeasible":
                     infeasible = True
                     break
-            if infeasible:
-                break
-            # full check of the solutions just computed against all N rows
-            check_lps = np.array(todo)
-            todo = []
-            rows, dev = _violated_rows(W, dx_sol[:, check_lps], m0, half + violation_tol * unit, ws_mask)
-            if rows.size:
-                new_rows = []
-                v = (dev - half[rows, None]) * inv_unit[rows, None]
-                for col, j in enumerate(check_lps):
-                    new = worst(v[:, col], rows)
-                    if new.size:
-                        todo.append(int(j))
-                        new_rows.append(new)
-                if new_rows:
-                    new_rows = np.unique(np.concatenate(new_rows))
-                    add(new_rows)
-                    pool = np.union1d(pool, new_rows)
+                dx_sol[:, j], x_sol[:, j] = sol.z, sol.x
+                nz = sol.duals != 0.0  # duals of the original rows for the original cost +-e_i (any y is valid)
+                duals[j] = (rows[nz], sol.duals[nz])
+            if not infeasible:  # full check of the solutions just computed against all N rows
+                check_lps = np.array(todo)
+                new = ws.full_check(dx_sol[:, check_lps], violation_tol, add_rows)
+                todo = [int(j) for j, rows in zip(check_lps, new) if rows.size]
     except LPError as exc:  # a model HiGHS rejects: the endpoints solved so far keep their (valid) duals
         lp_error = str(exc)
         infeasible = False
         failures.extend(j for j in range(n_lp) if duals[j][0].size == 0 and j not in failures)
 
-    lower = prior_lo.copy()
-    upper = prior_hi.copy()
-    if not infeasible:
-        # the safe bounds over the prior, then once more over the box they give (it encloses the set)
-        bounds = [SafeBound(W[rows], bl[rows], bu[rows], costs[j], yd, theta0) for j, (rows, yd) in enumerate(duals)]
-        for refine in (False, True):
-            if refine and np.any(lower > upper):
-                break  # the set is proven empty: no box to refine over
-            box_lo, box_hi = (lower.copy(), upper.copy()) if refine else (prior_lo, prior_hi)
-            for j in range(n_lp):
-                mu = bounds[j].over(box_lo, box_hi)
-                if j < p:
-                    lower[j] = max(lower[j], mu)
-                else:
-                    upper[j - p] = min(upper[j - p], -mu)
+    if infeasible:
+        lower, upper = prior_lo.copy(), prior_hi.copy()
+    else:
+        lower, upper = _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi)
     info = {
-        "lp_iterations": counters["iterations"],
-        "lp_solves": counters["solves"],
-        "working_rows": int(ws_idx.size),
+        "lp_iterations": 0 if model is None else model.iterations,
+        "lp_solves": 0 if model is None else model.solves,
+        "working_rows": 0 if ws is None else int(ws.idx.size),
         "rounds": rounds,
         "lp_failures": sorted(set(failures)),
         "converged": not todo and lp_error is None,
@@ -469,6 +371,41 @@ def scaled_residual_upper(W, y, w, theta):
         dev = np.maximum(up(y[s:e] - alo), up(ahi - y[s:e]))
         best = max(best, float(np.max(up(dev / w[s:e]))))
     return best
+
+
+def _chebyshev_first_rows(e0, w, initial_rows: int) -> np.ndarray:
+    """(N,) mask of the Chebyshev LP's first working set: spread rows plus the rows of largest scaled residual
+    ``|e0| / w`` at the centre, ``initial_rows`` in all (every row when there are fewer)."""
+    n_rows = e0.size
+    ws_mask = np.zeros(n_rows, dtype=bool)
+    ws_mask[_spread_rows(n_rows, initial_rows // 4)] = True
+    if n_rows > initial_rows:
+        res = np.abs(e0) / w
+        res[ws_mask] = -np.inf
+        k = initial_rows - int(ws_mask.sum())
+        ws_mask[np.argpartition(-res, k - 1)[:k]] = True
+    else:
+        ws_mask[:] = True
+    return ws_mask
+
+
+def _chebyshev_rows(W, rhs, w, idx):
+    """The Chebyshev LP's rows of samples ``idx`` over ``(theta, s)``: ``W_k theta + w_k s >= rhs_k`` for each
+    k, then ``W_k theta - w_k s <= rhs_k`` for each k. Returns ``(A (2k, p + 1), lo (2k,), hi (2k,))``."""
+    A = np.vstack([np.hstack([W[idx], w[idx, None]]), np.hstack([W[idx], -w[idx, None]])])
+    lo = np.concatenate([rhs[idx], np.full(idx.size, -np.inf)])
+    hi = np.concatenate([np.full(idx.size, np.inf), rhs[idx]])
+    return A, lo, hi
+
+
+def _scaled_residuals(W, e0, w, dtheta) -> np.ndarray:
+    """``|e0 - W dtheta| / w`` (N,) block by block (float: steers the constraint generation only)."""
+    n_rows = W.shape[0]
+    out = np.empty(n_rows)
+    for b in range(0, n_rows, _CHUNK):
+        e = min(n_rows, b + _CHUNK)
+        out[b:e] = np.abs(e0[b:e] - W[b:e] @ dtheta) / w[b:e]
+    return out
 
 
 def chebyshev(
@@ -508,56 +445,29 @@ def chebyshev(
     e0 = y - _matvec(W, theta0)  # residuals at the centre (float: steers the LP only)
 
     # HiGHS works on ((theta - theta0) / d, s) and rows scaled by r ~ 1 / w (powers of two), see interval_hull
-    r = power2_scale(w)
-    d = np.append(_column_scale(W, r), 1.0)
+    d = np.append(column_scale(W, power2_scale(w)), 1.0)
     x0 = np.append(theta0, 0.0)
-    h = _new_highs(lp_tol)
     xl, xu = np.append(prior_lo, 0.0), np.append(prior_hi, s_max)
-    check(h.addVars(p + 1, (xl - x0) / d, (xu - x0) / d), "addVars")
+    model = LPModel(xl, xu, center=x0, col_scale=d, tolerance=lp_tol, **PRIMAL_SIMPLEX)
     cost = np.zeros(p + 1)
     cost[p] = 1.0
-    check(h.changeColsCost(p + 1, np.arange(p + 1, dtype=np.int32), cost), "changeColsCost")
-
-    def rows_for(idx):
-        A_lo = np.hstack([W[idx], w[idx, None]])  # W theta + w s >= y
-        A_hi = np.hstack([W[idx], -w[idx, None]])  # W theta - w s <= y
-        return np.vstack([A_lo, A_hi])
 
     def add_model_rows(idx):
-        rr = np.concatenate([r[idx], r[idx]])
-        lo = np.concatenate([e0[idx], np.full(idx.size, -np.inf)])
-        hi = np.concatenate([np.full(idx.size, np.inf), e0[idx]])
-        add_dense_rows(h, rows_for(idx) * d * rr[:, None], lo * rr, hi * rr)
+        A, lo, hi = _chebyshev_rows(W, e0, w, idx)  # bounds shifted to the centre: e0 = y - W theta0
+        model.add_shifted_rows(A, lo, hi, np.concatenate([w[idx], w[idx]]))
 
-    ws_mask = np.zeros(n_rows, dtype=bool)
-    ws_mask[_spread_rows(n_rows, initial_rows // 4)] = True
-    if n_rows > initial_rows:
-        res = np.abs(e0) / w
-        res[ws_mask] = -np.inf
-        k = initial_rows - int(ws_mask.sum())
-        ws_mask[np.argpartition(-res, k - 1)[:k]] = True
-        del res
-    else:
-        ws_mask[:] = True
+    ws_mask = _chebyshev_first_rows(e0, w, initial_rows)
     ws_idx = np.flatnonzero(ws_mask)
     order = [ws_idx]
     add_model_rows(ws_idx)
-    iterations = 0
     rounds = 0
     while True:
         rounds += 1
-        run_error = h.run() == _ERROR
-        iterations += int(h.getInfo().simplex_iteration_count)
-        sol = h.getSolution()
-        if run_error or h.getModelStatus() != _OPTIMAL or not sol.value_valid:
-            raise LPError(f"HiGHS failed on the Chebyshev LP: {h.modelStatusToString(h.getModelStatus())}")
-        z = np.asarray(sol.col_value) * d
-        dtheta, s = z[:p], z[p]
-        # scaled residuals of all rows at theta, block by block
-        worst = np.empty(n_rows)
-        for b in range(0, n_rows, _CHUNK):
-            e = min(n_rows, b + _CHUNK)
-            worst[b:e] = np.abs(e0[b:e] - W[b:e] @ dtheta) / w[b:e]
+        sol = model.solve(cost if rounds == 1 else None)  # LPError unless optimal or infeasible
+        if sol.status != "optimal":
+            raise LPError("HiGHS failed on the Chebyshev LP: infeasible (it always has a solution)")
+        dtheta, s = sol.z[:p], sol.z[p]
+        worst = _scaled_residuals(W, e0, w, dtheta)
         worst[ws_mask] = -np.inf
         bad = np.flatnonzero(worst > s + violation_tol * max(s, 1e-300))
         if bad.size == 0 or rounds >= max_rounds:
@@ -569,20 +479,15 @@ def chebyshev(
         add_model_rows(bad)
 
     ws_all = np.concatenate(order)
-    rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(2 * ws_all.size)
-    if rd.size != 2 * ws_all.size:
-        raise LPError(f"HiGHS returned {rd.size} row duals for {2 * ws_all.size} rows")
     # HiGHS keeps the rows in insertion order: each block added the >= rows of the block, then its <= rows
-    A = np.vstack([rows_for(blk) for blk in order])
-    lo = np.concatenate([np.concatenate([y[blk], np.full(blk.size, -np.inf)]) for blk in order])
-    hi = np.concatenate([np.concatenate([np.full(blk.size, np.inf), y[blk]]) for blk in order])
-    rd = rd * np.concatenate([np.concatenate([r[blk], r[blk]]) for blk in order])  # duals of the unscaled rows
+    A, lo, hi = (np.concatenate(part) for part in zip(*(_chebyshev_rows(W, y, w, blk) for blk in order)))
+    rd = sol.duals  # the duals of the unscaled rows
     nz = rd != 0.0
     lower = shifted_safe_bound(A[nz], lo[nz], hi[nz], xl, xu, cost, rd[nz], x0)
     theta = np.clip(theta0 + dtheta, prior_lo, prior_hi)
     upper = scaled_residual_upper(W, y, w, theta)
     info = {
-        "lp_iterations": iterations,
+        "lp_iterations": model.iterations,
         "working_rows": int(ws_all.size),
         "rounds": rounds,
         "converged": rounds < max_rounds,

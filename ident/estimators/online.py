@@ -44,20 +44,17 @@ from __future__ import annotations
 
 import time
 
-import highspy
 import numpy as np
 
 from ident.errors import InconsistentDataError
 from ident.estimators.checks import check_finite, check_prior, real_array
 from ident.estimators.estimate import estimate
-from ident.estimators.hull import _column_scale, _new_highs, power2_scale, shifted_safe_bound, strip_bounds
-from ident.numerics.lp import LPError, add_dense_rows, check
+from ident.estimators.hull import strip_bounds
+from ident.numerics.lp import LPError, LPModel, column_scale, power2_scale, shifted_safe_bound
 from ident.box import Box
 
 __all__ = ["OnlineHull"]
 
-_OPTIMAL = highspy.HighsModelStatus.kOptimal
-_INFEASIBLE = highspy.HighsModelStatus.kInfeasible
 
 
 class OnlineHull:
@@ -100,7 +97,7 @@ class OnlineHull:
         self._bu = np.empty(cap)
         self._n = 0
         self._d: np.ndarray | None = None  # column scale, fixed at the first rows
-        self._models: list[highspy.Highs | None] = [None] * (2 * p)
+        self._models: list[LPModel | None] = [None] * (2 * p)
         self._x0 = np.zeros((p, 2 * p))  # each model's origin (its shift), set when the model is made
         self._ws: list[list[int]] = [[] for _ in range(2 * p)]  # working-set rows, in model order
         self._in_ws = [np.zeros(cap, dtype=bool) for _ in range(2 * p)]
@@ -142,16 +139,15 @@ class OnlineHull:
         c[j % self.p] = 1.0 if j < self.p else -1.0
         return c
 
-    def _model(self, j: int) -> highspy.Highs:
+    def _model(self, j: int) -> LPModel:
         """Model j, made (around the current box's midpoint, with its working-set rows) when missing."""
         if self._models[j] is None:
             x0 = np.clip(0.5 * self._lower + 0.5 * self._upper, self._lo, self._hi)
-            h = _new_highs(self.lp_tol)
-            check(h.setOptionValue("simplex_strategy", 1), "simplex_strategy")  # dual simplex: new rows keep the basis dual feasible
-            check(h.addVars(self.p, (self._lo - x0) / self._d, (self._hi - x0) / self._d), "addVars")
-            # cost +-1 on the scaled column (not +-d_i, which is tiny when the strips are narrow and would fall
-            # below HiGHS's dual tolerance); the duals are mapped back with d_i in _bound
-            check(h.changeColsCost(self.p, np.arange(self.p, dtype=np.int32), self._cost(j)), "changeColsCost")
+            # dual simplex: new rows keep the basis dual feasible
+            h = LPModel(self._lo, self._hi, center=x0, col_scale=self._d, tolerance=self.lp_tol, simplex_strategy=1)
+            # HiGHS sees the cost +-1 on the scaled column (not +-d_i, which is tiny when the strips are narrow
+            # and would fall below HiGHS's dual tolerance); the model maps the duals back
+            h.set_cost(self._cost(j))
             self._x0[:, j] = x0
             self._models[j] = h
             if self._ws[j]:
@@ -159,10 +155,8 @@ class OnlineHull:
         return self._models[j]
 
     def _add_model_rows(self, j: int, rows: np.ndarray) -> None:
-        r = power2_scale(0.5 * self._bu[rows] - 0.5 * self._bl[rows])
-        a0 = self._W[rows] @ self._x0[:, j]
-        add_dense_rows(self._models[j], self._W[rows] * self._d * r[:, None], (self._bl[rows] - a0) * r,
-                       (self._bu[rows] - a0) * r)
+        half = 0.5 * self._bu[rows] - 0.5 * self._bl[rows]  # each row in units of its half-width
+        self._models[j].add_rows(self._W[rows], self._bl[rows], self._bu[rows], half)
 
     def _add(self, j: int, rows: np.ndarray) -> None:
         rows = rows[~self._in_ws[j][rows]]
@@ -236,7 +230,7 @@ class OnlineHull:
         self._bl[s:e], self._bu[s:e] = strip_bounds(y, b)
         self._n = e
         if self._d is None:
-            self._d = _column_scale(W, power2_scale(b))  # columns of the row-scaled block (units-invariant)
+            self._d = column_scale(W, power2_scale(b))  # columns of the row-scaled block (units-invariant)
         # 1. which endpoints does a new row cut off?
         new = np.arange(s, e)
         viol = self._violation(new, self._x)
@@ -331,23 +325,19 @@ class OnlineHull:
     def _solve(self, j: int) -> str:
         h = self._model(j)
         self._duals[j] = None  # until this solve gives duals for the model's current rows
-        run_error = h.run() == highspy.HighsStatus.kError
-        info = h.getInfo()
-        self.stats["lp_solves"] += 1
-        self.stats["lp_iterations"] += int(info.simplex_iteration_count)
-        if run_error:
+        solves, iterations = h.solves, h.iterations
+        try:
+            sol = h.solve()
+        except LPError:
+            sol = None  # the previous (valid) bound of this endpoint stays
+        self.stats["lp_solves"] += h.solves - solves
+        self.stats["lp_iterations"] += h.iterations - iterations
+        if sol is None:
             return "failed"
-        status = h.getModelStatus()
-        if status == _INFEASIBLE:
+        if sol.status == "infeasible":
             return "infeasible"
-        sol = h.getSolution()
-        if status != _OPTIMAL or not sol.value_valid:
-            return "failed"  # the previous (valid) bound of this endpoint stays
-        rd = np.asarray(sol.row_dual).copy() if sol.dual_valid else None
-        if rd is not None and rd.size != len(self._ws[j]):
-            return "failed"
-        self._x[:, j] = np.clip(self._x0[:, j] + np.asarray(sol.col_value) * self._d, self._lo, self._hi)
-        self._duals[j] = rd
+        self._x[:, j] = np.clip(sol.x, self._lo, self._hi)
+        self._duals[j] = sol.duals  # of the unscaled rows for the cost +-e_i
         return "ok"
 
     def _bound(self, j: int, box_lo: np.ndarray, box_hi: np.ndarray) -> None:
@@ -357,8 +347,7 @@ class OnlineHull:
         if rd is None or np.any(box_lo > box_hi):
             return
         ws = np.asarray(self._ws[j], dtype=np.int64)
-        r = power2_scale(0.5 * self._bu[ws] - 0.5 * self._bl[ws])
-        yd = rd * r * self._d[j % self.p]  # duals of the unscaled rows for the cost +-e_i: y_k = d_i r_k y'_k
+        yd = rd  # duals of the unscaled rows for the cost +-e_i: y_k = d_i r_k y'_k (LPModel.solve)
         nz = yd != 0.0
         rows = ws[nz]
         mu = shifted_safe_bound(self._W[rows], self._bl[rows], self._bu[rows], box_lo, box_hi, self._cost(j), yd[nz],

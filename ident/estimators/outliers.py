@@ -67,9 +67,9 @@ from ident.box import Box
 from ident.errors import InconsistentDataError, OutlierBudgetError
 from ident.estimators.checks import check_bound, check_prior, check_W_y
 from ident.estimators.estimate import estimate, min_consistent_bound
-from ident.estimators.hull import _column_scale, power2_scale, safe_lower_bound, strip_bounds
+from ident.estimators.hull import strip_bounds
 from ident.numerics.interval import point_matvec, up
-from ident.numerics.lp import check, new_highs
+from ident.numerics.lp import LPError, LPModel, check, column_scale, power2_scale, safe_lower_bound
 
 __all__ = ["OutlierBudgetError", "OutlierRows", "detect_outliers", "relaxed_hull"]
 
@@ -259,7 +259,7 @@ class _BigM:
         self.xl = np.concatenate([lo, np.zeros(n), [0.0]])
         self.xu = np.concatenate([hi, np.ones(n), [self.s_max]])
         r = power2_scale(self.w)  # rows to units of their half-width first, then columns (units-invariant)
-        self.d = np.concatenate([_column_scale(W, r), np.ones(n + 1)])
+        self.d = np.concatenate([column_scale(W, r), np.ones(n + 1)])
         self.r = np.concatenate([r] * 2 + [np.ones(1)])
         self.lp_tol = lp_tol
 
@@ -286,47 +286,39 @@ class _BigM:
                 bu[a] = float(self.budget)
         return A, bl, bu
 
-    def highs(self, integer: bool) -> highspy.Highs:
+    def highs(self, integer: bool) -> LPModel:
+        """The model on the LP core (columns scaled by ``d``, rows by ``r``, no shift): the MILP (``integer``,
+        z binary, no elastic slack) or the LP relaxation of the branch and bound (dual simplex: node changes
+        are bound changes)."""
         n, p = self.n, self.p
         if integer:
-            h = new_highs(None, mip_rel_gap=1e-9, mip_abs_gap=0.0, primal_feasibility_tolerance=self.lp_tol,
-                          mip_feasibility_tolerance=self.lp_tol)
+            h = LPModel(self.xl, self.xu, center=np.zeros(p + n + 1), col_scale=self.d, tolerance=None,
+                        presolve="choose", mip_rel_gap=1e-9, mip_abs_gap=0.0, primal_feasibility_tolerance=self.lp_tol,
+                        mip_feasibility_tolerance=self.lp_tol)
         else:
-            # dual simplex: node changes are bound changes
-            h = new_highs(self.lp_tol, presolve="off", simplex_strategy=1)
-        check(h.addVars(p + n + 1, self.xl / self.d, self.xu / self.d), "addVars")
-        # sparse rows: each upper/lower row has the p theta entries, its z and s
-        d, r = self.d, self.r
-        starts, index, value, lo_b, hi_b = [], [], [], [], []
-        nnz = 0
-        cols_theta = np.arange(p)
-        for side in (0, 1):
-            for k in range(n):
-                rr = r[side * n + k]
-                starts.append(nnz)
-                zc = self.Ml[k] if side else -self.Mu[k]
-                wc = self.w[k] if side else -self.w[k]
-                index.extend(cols_theta.tolist() + [p + k, p + n])
-                value.extend((self.W[k] * d[:p] * rr).tolist() + [zc * rr, wc * rr])
-                nnz += p + 2
-                lo_b.append(self.bl[k] * rr if side else -np.inf)
-                hi_b.append(np.inf if side else self.bu[k] * rr)
-        starts.append(nnz)
-        index.extend(range(p, p + n))
-        value.extend([1.0] * n)
-        lo_b.append(-np.inf)
-        hi_b.append(float(self.budget))
-        check(h.addRows(2 * n + 1, np.array(lo_b), np.array(hi_b), len(value), np.array(starts, dtype=np.int32),
-                        np.array(index, dtype=np.int32), np.array(value)), f"addRows ({2 * n + 1} rows)")
+            h = LPModel(self.xl, self.xu, center=np.zeros(p + n + 1), col_scale=self.d, tolerance=self.lp_tol,
+                        simplex_strategy=1)
+        # sparse rows: each upper/lower row has the p theta entries, its z and s; then the budget row
+        k = np.arange(n)
+        index = np.concatenate([np.hstack([np.tile(np.arange(p), (n, 1)), (p + k)[:, None], np.full((n, 1), p + n)])
+                                .ravel()] * 2 + [p + k])
+        side_values = [np.hstack([self.W, (-self.Mu)[:, None], (-self.w)[:, None]]),
+                       np.hstack([self.W, self.Ml[:, None], self.w[:, None]])]
+        values = np.concatenate([v.ravel() for v in side_values] + [np.ones(n)])
+        starts = np.append(np.arange(2 * n) * (p + 2), 2 * n * (p + 2))
+        lo_b = np.concatenate([np.full(n, -np.inf), self.bl, [-np.inf]])
+        hi_b = np.concatenate([self.bu, np.full(n, np.inf), [float(self.budget)]])
+        h.add_sparse_rows(starts, index, values, lo_b, hi_b, np.concatenate([self.w, self.w, [1.0]]))
         if integer:
-            check(h.changeColsIntegrality(n, np.arange(p, p + n, dtype=np.int32),
-                                          np.full(n, highspy.HighsVarType.kInteger)), "changeColsIntegrality")
-            check(h.changeColBounds(p + n, 0.0, 0.0), "changeColBounds")  # no elastic slack in the MILP
+            check(h.highs.changeColsIntegrality(n, np.arange(p, p + n, dtype=np.int32),
+                                                np.full(n, highspy.HighsVarType.kInteger)), "changeColsIntegrality")
+            check(h.highs.changeColBounds(p + n, 0.0, 0.0), "changeColBounds")  # no elastic slack in the MILP
         return h
 
-    def safe_bound(self, cost: np.ndarray, row_dual_scaled: np.ndarray, xl, xu) -> float:
-        """Safe lower bound of ``min cost^T x`` over the LP with column bounds ``xl, xu`` (original units)."""
-        y = np.asarray(row_dual_scaled) * self.r  # duals of the unscaled rows (cost given unscaled: c' = D c)
+    def safe_bound(self, cost: np.ndarray, duals: np.ndarray, xl, xu) -> float:
+        """Safe lower bound of ``min cost^T x`` over the LP with column bounds ``xl, xu`` (original units), for
+        the duals of the unscaled rows (:meth:`LPModel.solve`)."""
+        y = np.asarray(duals)
         nz = np.flatnonzero(y != 0.0)
         A, bl, bu = self.rows(nz)
         return safe_lower_bound(A, bl, bu, xl, xu, cost, y[nz])
@@ -347,11 +339,11 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
     model = _BigM(W, bl, bu, lo, hi, budget, lp_tol)
     mip = None
     if highs_milp:
-        mip = model.highs(integer=True)
-        mip.setOptionValue("time_limit", float(milp_time_limit))
+        mip_model = model.highs(integer=True)
+        mip = mip_model.highs  # HiGHS's MILP statuses (a time limit with an incumbent) are read directly
+        check(mip.setOptionValue("time_limit", float(milp_time_limit)), "option time_limit")
     lp = model.highs(integer=False)
     ncol = p + n + 1
-    all_cols = np.arange(ncol, dtype=np.int32)
     lower, upper = lo.copy(), hi.copy()
     info = {"milp_objective": [], "milp_status": [], "nodes": [], "certified": [], "endpoint_gap": []}
     width = np.maximum(hi - lo, 1e-300)
@@ -363,11 +355,11 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
         cut = np.inf  # best objective of a point found in S_budget (float; steers the search only)
         hint: set = set()
         if mip is not None:  # HiGHS's own MILP solver: incumbent, hint and an independent value
-            mip.changeColsCost(ncol, all_cols, cost * model.d)
-            mip.run()
+            mip_model.set_cost(cost, normalize=False)
+            run_error = mip.run() == highspy.HighsStatus.kError  # no incumbent then: the search finds its own
             ms = mip.getModelStatus()
             sol = mip.getSolution()
-            if sol.value_valid and ms in (_OPTIMAL, highspy.HighsModelStatus.kTimeLimit):
+            if not run_error and sol.value_valid and ms in (_OPTIMAL, highspy.HighsModelStatus.kTimeLimit):
                 x = np.asarray(sol.col_value) * model.d
                 cut = float(cost[:p] @ x[:p])
                 hint = set(np.flatnonzero(x[p: p + n] > 0.5).tolist())
@@ -375,7 +367,7 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
             info["milp_status"].append(mip.modelStatusToString(ms))
         lp_cost = cost.copy()
         lp_cost[-1] = 1e4 * width[i]  # elastic penalty: any value keeps the bound valid; large makes it exact
-        lp.changeColsCost(ncol, all_cols, lp_cost * model.d)
+        lp.set_cost(lp_cost, normalize=False)
         tau = 1e-7 * width[i] + 1e-300
         heap = [(-np.inf, 0, 0, (), ())]  # (parent's safe bound, -depth, tie, E, K)
         closed = np.inf  # min safe bound over closed leaves
@@ -393,18 +385,19 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
             xl, xu = model.xl.copy(), model.xu.copy()
             xl[p + np.array(E, dtype=np.int64)] = 1.0
             xu[p + np.array(K, dtype=np.int64)] = 0.0
-            lp.changeColsBounds(ncol, all_cols, xl / model.d, xu / model.d)
-            run_error = lp.run() == highspy.HighsStatus.kError
-            s = lp.getSolution()
-            if run_error or lp.getModelStatus() != _OPTIMAL or not s.value_valid or not s.dual_valid:
+            lp.set_bounds(xl, xu)
+            try:
+                s = lp.solve()
+            except LPError:
+                s = None
+            if s is None or s.status != "optimal" or not s.dual_valid:
                 closed = min(closed, lbp)  # no usable duals: the parent's bound stays valid for this region
                 continue
-            lb = max(lbp, model.safe_bound(lp_cost, s.row_dual, xl, xu))
+            lb = max(lbp, model.safe_bound(lp_cost, s.duals, xl, xu))
             if lb >= cut - tau:
                 closed = min(closed, lb)
                 continue
-            x = np.asarray(s.col_value) * model.d
-            theta, slack = x[:p], x[-1]
+            theta, slack = s.x[:p], s.x[-1]
             v = W @ theta
             viol = np.maximum(v - bu, bl - v) / model.w
             free = np.ones(n, dtype=bool)

@@ -12,6 +12,14 @@
   ``HighsStatus``; an error (e.g. ``addRows`` rejects a whole block when an entry is ``>= 1e15`` in
   magnitude, leaving the model without those rows) raises :class:`LPError`. Callers turn it into a rigorous
   fallback (a coarser safe bound or the prior), never into a tighter box.
+* **One LP core.** :class:`LPModel` is the one HiGHS model of every linear program of the project (the
+  hull's 2p LPs and the Chebyshev fit, the Oettli-Prager LP, the online models, the big-M MILP and the
+  branch-and-bound LP, the prediction envelope, the half-width LPs of the experiment design): rows added in
+  dense or sparse blocks (constraint generation appends), column bounds, costs, warm-started re-solves, every
+  status checked, the scaling done once (a shift to a centre, rows by powers of two nearest their size,
+  columns by powers of two) and the duals returned for the original rows and cost. :class:`SafeBound` (with :func:`safe_lower_bound`, :func:`safe_upper_bound`,
+  :func:`shifted_safe_bound`) turns any duals into a rigorous bound over a box (Neumaier & Shcherbina,
+  Math. Program. 99, 2004), so neither the scaling nor the LP tolerances can affect rigour.
 """
 
 from __future__ import annotations
@@ -20,13 +28,30 @@ import ctypes
 import os
 import sys
 import threading
+from dataclasses import dataclass
 
 import highspy
 import numpy as np
 
 from ident.errors import LPError, LPFallbackWarning
+from ident.numerics.interval import down, mul, point_matmul, sub, sum_down, up
 
-__all__ = ["LARGE_ENTRY", "LPError", "LPFallbackWarning", "add_dense_rows", "check", "new_highs"]
+__all__ = [
+    "LARGE_ENTRY",
+    "LPError",
+    "LPFallbackWarning",
+    "LPModel",
+    "LPSolution",
+    "SafeBound",
+    "add_dense_rows",
+    "check",
+    "column_scale",
+    "new_highs",
+    "power2_scale",
+    "safe_lower_bound",
+    "safe_upper_bound",
+    "shifted_safe_bound",
+]
 
 LARGE_ENTRY = 1e15  # HiGHS's default large_matrix_value: addRows rejects a block holding an entry this large
 _ERROR = highspy.HighsStatus.kError
@@ -114,3 +139,280 @@ def add_dense_rows(h: highspy.Highs, A: np.ndarray, lo: np.ndarray, hi: np.ndarr
     starts = np.arange(m, dtype=np.int32) * n
     index = np.tile(np.arange(n, dtype=np.int32), m)
     check(h.addRows(m, np.asarray(lo, float), np.asarray(hi, float), m * n, starts, index, A.ravel()), f"addRows ({m} rows)")
+
+
+# ------------------------------------------------------------------------------------------ the LP core
+_OPTIMAL = highspy.HighsModelStatus.kOptimal
+_INFEASIBLE = highspy.HighsModelStatus.kInfeasible
+_CHUNK = 8192  # rows per block when scanning a matrix: temporaries stay small
+
+
+def power2_scale(v: np.ndarray) -> np.ndarray:
+    """Powers of two ``2^-round(log2 v)`` (1 where v is 0): multiplying by them is exact barring underflow."""
+    v = np.asarray(v, dtype=float)
+    if v.size > 1 and v.ndim == 1 and v[0] > 0 and np.all(v == v[0]):  # one value (a scalar bound): one log
+        return np.full(v.shape, float(np.ldexp(1.0, -int(np.rint(np.log2(v[0]))))))
+    out = np.ones_like(v)
+    pos = v > 0
+    out[pos] = np.ldexp(1.0, -np.rint(np.log2(v[pos])).astype(int))
+    return out
+
+
+def column_scale(A: np.ndarray, row_scale: np.ndarray | None = None) -> np.ndarray:
+    """Power-of-two column scales bringing each column of ``diag(row_scale) A`` to a root-mean-square of about 1.
+
+    A : (m, n); row_scale : (m,) the row factors HiGHS sees (default 1). Computed on the row-scaled matrix, so
+    that the scaled model does not depend on the units of the rows nor of the columns, up to powers of two.
+    One blocked pass over A. Returns (n,).
+    """
+    common = 1.0
+    if row_scale is not None and row_scale.size and np.all(row_scale == row_scale[0]):
+        common, row_scale = float(row_scale[0]), None  # one factor for all rows (a power of two): exact
+    ss = np.zeros(A.shape[1])
+    for s in range(0, A.shape[0], _CHUNK):
+        blk = A[s : s + _CHUNK]
+        if row_scale is not None:
+            blk = blk * row_scale[s : s + _CHUNK, None]
+        ss += np.einsum("ij,ij->j", blk, blk)
+    return power2_scale(np.sqrt(ss / max(A.shape[0], 1)) * common)
+
+
+@dataclass
+class LPSolution:
+    """One solve of :class:`LPModel`: ``status`` 'optimal' or 'infeasible'; on 'optimal', ``x`` (n,) the
+    solution in the model's original coordinates (float, unverified), ``z`` (n,) the same as a shift from the
+    centre, ``duals`` (m,) the row duals of the ORIGINAL (unscaled) rows for the ORIGINAL cost (zeros when
+    HiGHS gives none, then ``dual_valid`` is False), usable as the dual guess of :class:`SafeBound`;
+    ``iterations`` the simplex iterations of this solve."""
+
+    status: str
+    x: np.ndarray | None = None
+    z: np.ndarray | None = None
+    duals: np.ndarray | None = None
+    iterations: int = 0
+    dual_valid: bool = True
+
+
+class LPModel:
+    """One HiGHS model of ``min c^T x  s.t.  lo <= A x <= hi, xl <= x <= xu``, scaled and shifted once.
+
+    HiGHS sees ``z = (x - center) / d`` (``d`` powers of two, :func:`column_scale` of the row-scaled rows or
+    given) and each row multiplied by a power of two ``r`` (:func:`power2_scale` of its ``row_scale``, e.g. its
+    bound or half-width). Rows are added in blocks (constraint generation friendly: :meth:`add_rows` appends);
+    costs change between warm-started solves (:meth:`solve`); every HiGHS status is checked (:class:`LPError`
+    on any failure, never a silent value) and the row duals are returned unscaled, for the original rows and
+    cost, so that :class:`SafeBound` on the original data turns them into a rigorous bound whatever the
+    scaling (Neumaier & Shcherbina, Math. Program. 99, 2004).
+
+    xl, xu : (n,) finite column bounds; center : (n,) the origin of HiGHS's coordinates (default the
+    midpoint of the box); col_scale : (n,) powers of two (default 1, see :meth:`scale_columns`);
+    tolerance : primal/dual feasibility tolerance; options : further HiGHS options (default ``presolve='off'``).
+    """
+
+    def __init__(self, xl, xu, *, center=None, col_scale=None, tolerance: float | None = 1e-9, **options) -> None:
+        self.xl = np.asarray(xl, dtype=float)
+        self.xu = np.asarray(xu, dtype=float)
+        n = self.xl.size
+        if self.xl.shape != (n,) or self.xu.shape != (n,):
+            raise ValueError(f"xl and xu must be (n,) arrays of one length, got {self.xl.shape} and {self.xu.shape}")
+        self.n = n
+        self.center = 0.5 * self.xl + 0.5 * self.xu if center is None else np.asarray(center, dtype=float)
+        self.d = np.ones(n) if col_scale is None else np.asarray(col_scale, dtype=float)
+        self.r = np.zeros(0)  # the row factors, in insertion order
+        self.iterations = 0
+        self.solves = 0
+        self._norm: float | None = None
+        self._cols = np.arange(n, dtype=np.int32)
+        self.highs = new_highs(tolerance, **{"presolve": "off", **options})
+        check(self.highs.addVars(n, (self.xl - self.center) / self.d, (self.xu - self.center) / self.d), "addVars")
+
+    @property
+    def m(self) -> int:
+        """The number of rows added so far."""
+        return int(self.r.size)
+
+    def add_rows(self, A, lo, hi, row_scale=None) -> None:
+        """Append the rows ``lo <= A x <= hi`` (original coordinates; A (k, n), lo, hi (k,), may be infinite).
+
+        row_scale : (k,) each row's size (its bound or half-width; default 1): HiGHS sees the row times the
+        power of two nearest ``1 / row_scale``. The bounds are shifted to the centre (``lo - A center``).
+        """
+        A = np.asarray(A, dtype=float)
+        a0 = A @ self.center
+        self.add_shifted_rows(A, np.asarray(lo, float) - a0, np.asarray(hi, float) - a0, row_scale)
+
+    def add_shifted_rows(self, A, lo_shift, hi_shift, row_scale=None) -> None:
+        """Append rows ``lo_shift <= A (x - center) <= hi_shift`` (bounds already relative to the centre)."""
+        A = np.asarray(A, dtype=float)
+        r = np.ones(A.shape[0]) if row_scale is None else power2_scale(row_scale)
+        add_dense_rows(self.highs, A * self.d * r[:, None], lo_shift * r, hi_shift * r)
+        self.r = np.concatenate([self.r, r])
+
+    def add_sparse_rows(self, starts, index, values, lo, hi, row_scale=None) -> None:
+        """Append sparse rows ``lo <= A x <= hi`` in compressed row form (original coordinates): row i holds
+        the entries ``values[starts[i]:starts[i + 1]]`` in the columns ``index[...]`` (every row non-empty).
+
+        starts : (k,) int; index, values : (nnz,); lo, hi : (k,) (may be infinite); row_scale as in
+        :meth:`add_rows`. The bounds are shifted to the centre and each entry scaled by its row's power of
+        two and its column's scale. :class:`LPError` when an entry is not finite or ``>= LARGE_ENTRY``.
+        """
+        starts = np.asarray(starts, dtype=np.int64)
+        index = np.asarray(index, dtype=np.int32)
+        values = np.asarray(values, dtype=float)
+        k = starts.size
+        if k == 0:
+            return
+        counts = np.diff(np.append(starts, values.size))
+        if np.any(counts <= 0):
+            raise LPError("add_sparse_rows needs every row non-empty")
+        amax = float(np.max(np.abs(values)))
+        if not np.isfinite(amax) or amax >= LARGE_ENTRY:
+            raise LPError(f"rows with a matrix entry of magnitude {amax:.3g} (HiGHS accepts < {LARGE_ENTRY:.0e})")
+        r = np.ones(k) if row_scale is None else power2_scale(row_scale)
+        a0 = np.add.reduceat(values * self.center[index], starts)
+        lo_s = (np.asarray(lo, float) - a0) * r
+        hi_s = (np.asarray(hi, float) - a0) * r
+        scaled = values * self.d[index] * np.repeat(r, counts)
+        check(self.highs.addRows(k, lo_s, hi_s, values.size, starts.astype(np.int32), index, scaled),
+              f"addRows ({k} rows)")
+        self.r = np.concatenate([self.r, r])
+
+    def set_bounds(self, xl, xu) -> None:
+        """Change every column's bounds (original coordinates), e.g. a branch-and-bound node."""
+        self.xl, self.xu = np.asarray(xl, dtype=float), np.asarray(xu, dtype=float)
+        check(self.highs.changeColsBounds(self.n, self._cols, (self.xl - self.center) / self.d,
+                                          (self.xu - self.center) / self.d), "changeColsBounds")
+
+    def basis(self):
+        """HiGHS's current basis (to warm-start a later model of the same shape, :meth:`set_basis`)."""
+        return self.highs.getBasis()
+
+    def set_basis(self, basis) -> None:
+        """Start the next solve from ``basis`` (a :meth:`basis` of a model of the same shape)."""
+        check(self.highs.setBasis(basis), "setBasis")
+
+    def set_cost(self, cost, *, normalize: bool = True) -> None:
+        """Set the objective ``min cost^T x`` (cost (n,) finite, not zero) without solving; HiGHS sees
+        ``cost d / max |cost d|`` (``cost d`` itself with ``normalize=False``)."""
+        cd = np.asarray(cost, dtype=float) * self.d
+        norm = float(np.max(np.abs(cd))) if cd.size else 0.0
+        if norm == 0.0 or not np.isfinite(norm):
+            raise LPError(f"cost must be finite and not zero, got max |cost d| = {norm!r}")
+        if not normalize:
+            norm = 1.0
+        check(self.highs.changeColsCost(self.n, self._cols, cd / norm), "changeColsCost")
+        self._norm = norm
+
+    def solve(self, cost=None) -> LPSolution:
+        """Solve ``min cost^T x`` warm-started from the previous basis; :class:`LPError` unless HiGHS finds the
+        LP optimal or infeasible (any other model status, an error of ``run``, a solution without values).
+
+        cost : (n,) finite, not zero (None: the previous solve's cost, e.g. after rows were added). HiGHS sees
+        ``(cost d) / max |cost d|`` (the unit vector itself when cost is one); the returned duals are those of
+        the original rows and cost: ``y_k = r_k y'_k max |cost d|``.
+        """
+        h = self.highs
+        if cost is not None:
+            self.set_cost(cost)
+        elif self._norm is None:
+            raise LPError("no cost set: pass one to the first solve")
+        norm = self._norm
+        run_status = h.run()
+        self.solves += 1
+        check(run_status, "run")
+        it = int(h.getInfo().simplex_iteration_count)
+        self.iterations += it
+        ms = h.getModelStatus()
+        if ms == _INFEASIBLE:
+            return LPSolution("infeasible", iterations=it)
+        sol = h.getSolution()
+        if ms != _OPTIMAL or not sol.value_valid or len(sol.col_value) != self.n:
+            raise LPError(f"HiGHS did not solve the LP: {h.modelStatusToString(ms)}")
+        rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(self.m)
+        if rd.size != self.m:
+            raise LPError(f"HiGHS returned {rd.size} row duals for {self.m} rows")
+        z = np.asarray(sol.col_value) * self.d
+        return LPSolution("optimal", x=self.center + z, z=z, duals=rd * self.r * norm, iterations=it,
+                          dual_valid=bool(sol.dual_valid))
+
+
+# ------------------------------------------------------------------------------------------ the safe bound
+class SafeBound:
+    """Neumaier-Shcherbina lower bound of ``min c^T x  s.t.  bl <= A x <= bu`` for a dual guess ``y``, to be
+    evaluated over one or more column boxes (:meth:`over`), optionally around a float point ``x0``.
+
+    A : (m, n) float; bl, bu : (m,) (may be -inf / +inf); c : (n,); y : (m,); x0 : (n,) or None.
+    Neumaier & Shcherbina (2004): for every feasible x, ``c^T x = y^T A x - r^T x`` with ``r = A^T y - c``,
+    and each term is bounded below over its box. Entries of ``y`` that would multiply an infinite row
+    bound are set to zero first (any ``y`` is allowed). ``r`` is enclosed with rigorous dot-product error
+    bounds and every product and the final sum are rounded downward. The row terms and ``r`` do not depend on
+    the box, so a second box (e.g. a box already proven to enclose the set) costs only ``n`` products.
+
+    With ``x0``: ``x = x0 + z``, ``bl - A x0 <= A z <= bu - A x0`` (``A x0`` enclosed, bounds rounded outward),
+    ``z in [xl - x0, xu - x0]`` (rounded outward) and ``c^T x = c^T x0 + c^T z`` (bounded below). The terms
+    are then of the size of the strips rather than of ``|y| |bl|``, which keeps the bound tight when the
+    strips are narrow (bounds of 1e-13 relative).
+    """
+
+    def __init__(self, A, bl, bu, c, y, x0=None) -> None:
+        A = np.asarray(A, dtype=float)
+        bl = np.asarray(bl, dtype=float)
+        bu = np.asarray(bu, dtype=float)
+        c = np.asarray(c, dtype=float)
+        y = np.array(y, dtype=float)
+        self.x0 = None if x0 is None else np.asarray(x0, dtype=float)
+        self.cx0 = 0.0
+        if self.x0 is not None:
+            if A.shape[0]:
+                alo, ahi = point_matmul(A, self.x0)
+                bl = np.where(np.isneginf(bl), -np.inf, down(bl - ahi))
+                bu = np.where(np.isposinf(bu), np.inf, up(bu - alo))
+            self.cx0 = float(sum_down(down(c * self.x0)))  # each product rounded down, then the sum
+        y[np.isneginf(bl) & (y > 0)] = 0.0  # y_i > 0 pairs with bl_i, y_i < 0 with bu_i
+        y[np.isposinf(bu) & (y < 0)] = 0.0
+        y[~np.isfinite(y)] = 0.0
+        keep = y != 0.0
+        A, bl, bu, y = A[keep], bl[keep], bu[keep], y[keep]
+        # rows: min(y bl, y bu) = y bl if y > 0 else y bu; one product, rounded down
+        self.rows = down(np.where(y > 0, y * np.where(y > 0, bl, 0.0), y * np.where(y < 0, bu, 0.0)))
+        # r = A^T y - c, enclosed
+        if A.shape[0]:
+            glo, ghi = point_matmul(A.T, y)
+        else:
+            glo = ghi = np.zeros_like(c)
+        self.rlo, self.rhi = sub(glo, ghi, c, c)
+
+    def over(self, xl, xu) -> float:
+        """The bound over the column box ``[xl, xu]`` (finite)."""
+        xl = np.asarray(xl, dtype=float)
+        xu = np.asarray(xu, dtype=float)
+        if not (np.all(np.isfinite(xl)) and np.all(np.isfinite(xu))):
+            raise ValueError("safe_lower_bound needs finite column bounds xl, xu")
+        if self.x0 is not None:
+            xl, xu = down(xl - self.x0), up(xu - self.x0)
+        # min over r in [rlo, rhi], x in [xl, xu] of -r x: bilinear, attained at a corner
+        plo, _ = mul(-self.rhi, -self.rlo, xl, xu)
+        mu = float(sum_down(np.concatenate([self.rows, plo])))
+        return mu if self.x0 is None else float(down(mu + self.cx0))
+
+
+def safe_lower_bound(A, bl, bu, xl, xu, c, y) -> float:
+    """Rigorous lower bound of ``min c^T x  s.t.  bl <= A x <= bu, xl <= x <= xu`` for any dual guess ``y``.
+
+    A : (m, n) float; bl, bu : (m,) (may be -inf / +inf); xl, xu : (n,) finite; c : (n,); y : (m,).
+    See :class:`SafeBound` (Neumaier & Shcherbina 2004).
+    """
+    return SafeBound(A, bl, bu, c, y).over(xl, xu)
+
+
+def shifted_safe_bound(A, bl, bu, xl, xu, c, y, x0) -> float:
+    """:func:`safe_lower_bound` evaluated around a float point ``x0`` (same guarantee, smaller rounding;
+    see :class:`SafeBound`)."""
+    return SafeBound(A, bl, bu, c, y, x0).over(xl, xu)
+
+
+def safe_upper_bound(A, bl, bu, xl, xu, c, y, x0=None) -> float:
+    """Rigorous upper bound of ``max c^T x  s.t.  bl <= A x <= bu, xl <= x <= xu`` for any dual guess ``y``
+    of the equivalent ``min -c^T x`` (e.g. :meth:`LPModel.solve`'s duals for the cost ``-c``); optionally
+    evaluated around ``x0``. See :class:`SafeBound` (Neumaier & Shcherbina 2004)."""
+    return -SafeBound(A, bl, bu, -np.asarray(c, dtype=float), y, x0).over(xl, xu)

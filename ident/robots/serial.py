@@ -542,77 +542,15 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
 
 # ------------------------------------------------------------------------------------- prediction envelope
 def prediction_envelope(W, y, bound, lower, upper, W_new, *, center=None, lp_tol: float = 1e-9):
-    """Rigorous ``[min, max]`` of ``W_new_k theta`` over the feasible set ``S = {theta in [lower, upper] :
-    |y - W theta| <= bound}`` for every row k of W_new: the guaranteed prediction of new rows' model torque.
+    """Rigorous ``[min, max]`` of ``W_new_k theta`` over ``S = {theta in [lower, upper] : |y - W theta| <= bound}``
+    for every row k of W_new: the guaranteed prediction of new rows' model torque.
 
-    Over a box (e.g. the hull of S) the range of a linear function is exact by interval evaluation but ignores
-    the correlations of S; over S itself it is an LP per endpoint. Each LP (HiGHS, dual simplex, warm-started
-    from the previous optimum, rows scaled by their bound, columns to unit RMS) only steers: the returned
-    endpoint is the Neumaier-Shcherbina safe bound :func:`ident.estimators.hull.safe_lower_bound` of the original data
-    with the LP's row duals, rigorous for any duals (an LP that fails gives the box bound). Each endpoint is
-    also intersected with the interval evaluation over ``[lower, upper]`` (both are outer bounds).
-
-    W : (m, p); y : (m,); bound : scalar or (m,) > 0; lower, upper : (p,) finite box containing S (the prior
-    or a hull of S); W_new : (k, p); center : (p,) point near S (LP origin; default least squares).
-    Returns (lo (k,), hi (k,), info {'lp_solves', 'lp_failures', 'seconds'}).
+    The generic estimator :func:`ident.estimators.envelope.envelope_lp` (two warm-started LPs per row, safe
+    dual bounds, intersected with the interval evaluation over the box). W : (m, p); y : (m,); bound : scalar
+    or (m,) > 0; lower, upper : (p,) finite box containing S (the prior or a hull of S); W_new : (k, p);
+    center : (p,) point near S (LP origin; default least squares). Returns (lo (k,), hi (k,), info
+    {'lp_solves', 'lp_failures', 'seconds'}).
     """
-    import time as _time
+    from ident.estimators.envelope import envelope_lp
 
-    from ident.estimators.hull import power2_scale, safe_lower_bound, strip_bounds
-    from ident.numerics.interval import point_matvec
-    from ident.numerics.lp import add_dense_rows, check, new_highs
-
-    t0 = _time.perf_counter()
-    W = np.asarray(W, dtype=float)
-    y = np.asarray(y, dtype=float)
-    W_new = np.asarray(W_new, dtype=float)
-    lower = np.asarray(lower, dtype=float)
-    upper = np.asarray(upper, dtype=float)
-    m, p = W.shape
-    if y.shape != (m,) or W_new.ndim != 2 or W_new.shape[1] != p or lower.shape != (p,) or upper.shape != (p,):
-        raise ValueError(f"W (m, p), y (m,), W_new (k, p), lower and upper (p,) must agree, got W {W.shape}, "
-                         f"y {y.shape}, W_new {W_new.shape}, lower {lower.shape}, upper {upper.shape}")
-    b = np.broadcast_to(np.asarray(bound, dtype=float), (m,))
-    if not np.all(np.isfinite(b)) or np.any(b <= 0):
-        raise ValueError("bound must be finite and > 0")
-    bl, bu = strip_bounds(y, b)
-    box_lo, box_hi = point_matvec(W_new, lower, upper)
-    lo_out, hi_out = np.array(box_lo, dtype=float), np.array(box_hi, dtype=float)
-    x0 = np.linalg.lstsq(W, y, rcond=None)[0] if center is None else np.asarray(center, dtype=float)
-    x0 = np.clip(x0, lower, upper)
-    r = power2_scale(b)
-    Wr = W * r[:, None]
-    d = power2_scale(np.sqrt(np.mean(Wr**2, axis=0)) + 1e-300)
-    h = new_highs(lp_tol, presolve="off")
-    check(h.addVars(p, (lower - x0) / d, (upper - x0) / d), "addVars")
-    m0 = W @ x0
-    add_dense_rows(h, Wr * d, (bl - m0) * r, (bu - m0) * r)
-    cols = np.arange(p, dtype=np.int32)
-    solves, failures = 0, 0
-    for k in range(W_new.shape[0]):
-        for sign in (1.0, -1.0):
-            c = sign * W_new[k]
-            cd = c * d
-            norm = float(np.max(np.abs(cd)))
-            if norm == 0.0:
-                continue
-            check(h.changeColsCost(p, cols, cd / norm), "changeColsCost")
-            h.run()
-            solves += 1
-            sol = h.getSolution()
-            if h.getModelStatus() != _highs_optimal() or not sol.dual_valid:
-                failures += 1
-                continue
-            duals = np.asarray(sol.row_dual) * r * norm
-            mu = safe_lower_bound(W, bl, bu, lower, upper, c, duals)
-            if sign > 0:
-                lo_out[k] = max(lo_out[k], mu)
-            else:
-                hi_out[k] = min(hi_out[k], -mu)
-    return lo_out, hi_out, {"lp_solves": solves, "lp_failures": failures, "seconds": _time.perf_counter() - t0}
-
-
-def _highs_optimal():
-    import highspy
-
-    return highspy.HighsModelStatus.kOptimal
+    return envelope_lp(W, y, bound, lower, upper, W_new, center=center, lp_tol=lp_tol)

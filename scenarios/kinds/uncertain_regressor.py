@@ -14,7 +14,8 @@ import numpy as np
 
 import ident
 import sim
-from ident.estimators.uncertain import interval_equation, regressor_distortion, uncertain_hull
+from ident.estimators.uncertain import uncertain_hull
+from ident.robots.h4_interval import interval_equation, regressor_distortion
 from scenarios import report
 from scenarios.experiment import estimate_hull, run_experiment
 from scenarios.rundir import save_run_files, sim_progress

@@ -24,13 +24,13 @@ from scipy.optimize import linprog
 
 import ident
 from ident.processing.filtering import ProcessingSettings, default_edge_samples, parallel_filter
-from ident.estimators.uncertain import (
+from ident.estimators.uncertain import uncertain_hull
+from ident.robots.h4_interval import (
     Distortion,
     encoder_radii,
     filter_interval,
     interval_equation,
     interval_regressor,
-    uncertain_hull,
 )
 
 
@@ -267,7 +267,7 @@ def test_interval_equation_encloses_a_noise_free_recording(geometry, exact_recor
     def fn(q, qd, qdd):
         return ident.regressor(geometry, q, qd, qdd)
 
-    from ident.estimators.uncertain import regressor_distortion
+    from ident.robots.h4_interval import regressor_distortion
 
     dist = regressor_distortion(fn, rec["q"], rec["qd"], rec["qdd"], settings)
     ieq = interval_equation(fn, rec["q"], rec["tau"], 1e-3, settings, counts_per_turn=None,

@@ -300,7 +300,7 @@ def test_highs_rejects_a_block_with_a_huge_entry_and_the_helper_says_so():
 
 @pytest.mark.parametrize("fail_at", [1, 2, 5])
 def test_a_model_highs_rejects_gives_a_coarser_box_with_a_warning_never_a_tighter_one(monkeypatch, fail_at):
-    import ident.estimators.hull as hull_module
+    import ident.numerics.lp as lp_module  # the LP core adds every row block of the hull's models
     from ident.numerics.lp import LPError, LPFallbackWarning
 
     rng = np.random.default_rng(5)
@@ -309,7 +309,7 @@ def test_a_model_highs_rejects_gives_a_coarser_box_with_a_warning_never_a_tighte
     b, lo, hi = 1.0, np.zeros(4), 2 * np.ones(4)
     exact_lo, exact_hi = linprog_hull(W, y, b, lo, hi)
     calls = {"n": 0}
-    real = hull_module.add_dense_rows
+    real = lp_module.add_dense_rows
 
     def flaky(*args):
         calls["n"] += 1
@@ -317,7 +317,7 @@ def test_a_model_highs_rejects_gives_a_coarser_box_with_a_warning_never_a_tighte
             raise LPError("rejected (test)")
         return real(*args)
 
-    monkeypatch.setattr(hull_module, "add_dense_rows", flaky)
+    monkeypatch.setattr(lp_module, "add_dense_rows", flaky)
     with pytest.warns(LPFallbackWarning):
         box = ident.estimate(W, y, b, (lo, hi))
     assert np.all(box.lower <= exact_lo + 1e-9) and np.all(box.upper >= exact_hi - 1e-9)

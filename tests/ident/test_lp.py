@@ -1,0 +1,132 @@
+"""The LP core (:class:`ident.numerics.lp.LPModel`) and the safe bound against scipy's linprog (HiGHS via scipy,
+an independent build and interface)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from ident.numerics.lp import LPError, LPModel, SafeBound, column_scale, power2_scale, safe_lower_bound
+
+
+def _random_lp(rng, m, n):
+    """A feasible LP: rows around a random interior point x_star, box around it."""
+    x_star = rng.uniform(-1.0, 1.0, n) * 10.0 ** rng.uniform(-2, 2, n)
+    A = rng.normal(size=(m, n)) * 10.0 ** rng.uniform(-3, 3, n)  # columns in very different units
+    a = A @ x_star
+    half = 10.0 ** rng.uniform(-4, 0, m) * (1.0 + np.abs(a))
+    lo, hi = a - half, a + half
+    width = 5.0 * (np.abs(x_star) + 1.0)
+    return A, lo, hi, x_star - width, x_star + width, x_star
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_lps_against_linprog(seed):
+    rng = np.random.default_rng(seed)
+    m, n = 60, 5
+    A, lo, hi, xl, xu, x_star = _random_lp(rng, m, n)
+    model = LPModel(xl, xu, center=x_star, col_scale=column_scale(A, power2_scale(0.5 * hi - 0.5 * lo)))
+    model.add_rows(A[:30], lo[:30], hi[:30], 0.5 * hi[:30] - 0.5 * lo[:30])
+    model.add_rows(A[30:], lo[30:], hi[30:], 0.5 * hi[30:] - 0.5 * lo[30:])  # a second block appended
+    assert model.m == m
+    for trial in range(4):
+        c = rng.normal(size=n)
+        ref = linprog(c, A_ub=np.vstack([A, -A]), b_ub=np.concatenate([hi, -lo]), bounds=list(zip(xl, xu)),
+                      method="highs")
+        assert ref.status == 0
+        sol = model.solve(c)
+        assert sol.status == "optimal"
+        scale = np.abs(c) @ (xu - xl)
+        assert c @ sol.x == pytest.approx(ref.fun, abs=1e-7 * scale)
+        # the duals are those of the original rows and cost: the safe bound is below the optimum, and tight
+        mu = safe_lower_bound(A, lo, hi, xl, xu, c, sol.duals)
+        assert mu <= ref.fun + 1e-12 * scale
+        mu_c = SafeBound(A, lo, hi, c, sol.duals, x_star).over(xl, xu)
+        assert mu_c <= ref.fun + 1e-12 * scale
+        assert mu_c == pytest.approx(ref.fun, abs=1e-6 * scale)
+    assert model.solves == 4 and model.iterations > 0
+
+
+def test_safe_bound_below_optimum_for_any_duals():
+    rng = np.random.default_rng(7)
+    A, lo, hi, xl, xu, _ = _random_lp(rng, 40, 4)
+    c = rng.normal(size=4)
+    ref = linprog(c, A_ub=np.vstack([A, -A]), b_ub=np.concatenate([hi, -lo]), bounds=list(zip(xl, xu)), method="highs")
+    for _ in range(20):  # arbitrary (wrong) dual guesses: still lower bounds
+        y = rng.normal(size=40) * 10.0 ** rng.uniform(-3, 1)
+        assert safe_lower_bound(A, lo, hi, xl, xu, c, y) <= ref.fun
+
+
+def test_infeasible_lp_reported():
+    model = LPModel(np.zeros(2), np.ones(2))
+    model.add_rows(np.array([[1.0, 1.0]]), np.array([3.0]), np.array([4.0]))  # x1 + x2 >= 3 over [0, 1]^2
+    assert model.solve(np.array([1.0, 0.0])).status == "infeasible"
+    ref = linprog([1.0, 0.0], A_ub=[[-1.0, -1.0]], b_ub=[-3.0], bounds=[(0, 1)] * 2, method="highs")
+    assert ref.status == 2  # scipy agrees: infeasible
+
+
+def test_status_errors_raised():
+    model = LPModel(np.zeros(2), np.ones(2))
+    with pytest.raises(LPError, match="magnitude"):
+        model.add_rows(np.array([[1e16, 1.0]]), np.array([0.0]), np.array([1.0]))
+    with pytest.raises(LPError, match="cost"):
+        model.solve(np.zeros(2))
+    with pytest.raises(LPError, match="option"):
+        LPModel(np.zeros(2), np.ones(2), no_such_option=1)
+    # an unbounded LP (free column) is neither optimal nor infeasible: LPError, never a silent value
+    free = LPModel(np.array([-np.inf]), np.array([np.inf]), center=np.zeros(1))
+    free.add_rows(np.array([[1.0]]), np.array([0.0]), np.array([np.inf]))
+    with pytest.raises(LPError, match="did not solve"):
+        free.solve(np.array([-1.0]))
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="xl and xu"):
+        LPModel(np.zeros(2), np.ones(3))
+
+
+def test_sparse_rows_and_bound_changes_against_linprog():
+    rng = np.random.default_rng(11)
+    m, n = 30, 6
+    A, lo, hi, xl, xu, x_star = _random_lp(rng, m, n)
+    A[rng.random(A.shape) < 0.5] = 0.0  # sparse
+    A[np.arange(m), rng.integers(0, n, m)] = 1.0  # every row non-empty
+    half = 10.0 ** rng.uniform(-3, 0, m) * (1.0 + np.abs(A @ x_star))
+    lo, hi = A @ x_star - half, A @ x_star + half  # x_star stays feasible
+    starts, index, values = [], [], []
+    for k in range(m):
+        starts.append(len(values))
+        nz = np.flatnonzero(A[k])
+        index.extend(nz.tolist())
+        values.extend(A[k, nz].tolist())
+    model = LPModel(xl, xu, center=x_star, col_scale=column_scale(A))
+    model.add_sparse_rows(np.array(starts), np.array(index), np.array(values), lo, hi, 0.5 * hi - 0.5 * lo)
+    c = rng.normal(size=n)
+    for shrink in (1.0, 0.5):  # the whole box, then a node of a branch and bound (bounds changed, warm start)
+        bl, bu = x_star - shrink * (x_star - xl), x_star + shrink * (xu - x_star)
+        model.set_bounds(bl, bu)
+        sol = model.solve(c)
+        ref = linprog(c, A_ub=np.vstack([A, -A]), b_ub=np.concatenate([hi, -lo]), bounds=list(zip(bl, bu)),
+                      method="highs")
+        scale = np.abs(c) @ (bu - bl)
+        assert sol.status == "optimal" and c @ sol.x == pytest.approx(ref.fun, abs=1e-7 * scale)
+        mu = safe_lower_bound(A, lo, hi, bl, bu, c, sol.duals)
+        assert mu <= ref.fun + 1e-12 * scale and mu == pytest.approx(ref.fun, abs=1e-6 * scale)
+    with pytest.raises(LPError, match="non-empty"):
+        model.add_sparse_rows(np.array([0, 0]), np.array([1]), np.array([1.0]), np.zeros(2), np.ones(2))
+
+
+def test_unnormalised_cost_gives_the_same_duals():
+    rng = np.random.default_rng(12)
+    A, lo, hi, xl, xu, x_star = _random_lp(rng, 25, 3)
+    c = rng.normal(size=3) * 100.0
+    duals = []
+    for normalize in (True, False):
+        model = LPModel(xl, xu, center=x_star)
+        model.add_rows(A, lo, hi)
+        model.set_cost(c, normalize=normalize)
+        sol = model.solve()
+        duals.append(sol.duals)
+        assert safe_lower_bound(A, lo, hi, xl, xu, c, sol.duals) <= c @ sol.x + 1e-9 * np.abs(c) @ (xu - xl)
+    np.testing.assert_allclose(duals[0], duals[1], rtol=1e-6, atol=1e-9 * np.max(np.abs(duals[0])))
