@@ -216,9 +216,10 @@ def _load_run(path: Path, prov: dict) -> dict | None:
     return data if data.get("provenance") == prov else None
 
 
-def check_same_campaign(out: Path, prov: dict) -> None:
-    """Refuse (:class:`CampaignMismatchError`) a folder ``out`` holding a campaign of other inputs than ``prov``
-    (seed, spec, model, code); nothing is refused when ``out`` holds no campaign."""
+def check_same_campaign(out: Path, prov: dict,
+                        hint: str = "Use --fresh to recompute it there, or another --out") -> None:
+    """Refuse (:class:`CampaignMismatchError`, ending with ``hint``) a folder ``out`` holding a campaign of other
+    inputs than ``prov`` (seed, spec, model, code); nothing is refused when ``out`` holds no campaign."""
     saved_path = Path(out) / "campaign.json"
     if not saved_path.is_file():
         return
@@ -229,8 +230,7 @@ def check_same_campaign(out: Path, prov: dict) -> None:
     diff = _differences(saved, prov)
     if diff:
         raise CampaignMismatchError(
-            f"--out {str(out)!r} holds a campaign computed from other inputs: {'; '.join(diff)}. Use --fresh to "
-            "recompute it there, or another --out")
+            f"--out {str(out)!r} holds a campaign computed from other inputs: {'; '.join(diff)}. {hint}")
 
 
 def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = False) -> tuple[list[dict], dict]:

@@ -45,7 +45,8 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
     if only is not None:
         if not 0 <= only < spec["campaign"]["runs"]:
             raise ScenarioError(f"only must be a run index in [0, {spec['campaign']['runs']}), got {only}")
-        check_same_campaign(out, provenance(spec, seed))  # run `only` of this campaign, not of another seed
+        check_same_campaign(out, provenance(spec, seed),  # run `only` of this campaign, not of another seed
+                            "Give the campaign's own --seed (and options), or another --out")
         with OwnedFolder(Path(out) / f"run-{only:04d}", option="--only") as tmp:
             result = replay_one(spec, only, seed, tmp, progress)
             write_json(tmp / "result.json", result)

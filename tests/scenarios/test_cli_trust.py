@@ -93,8 +93,10 @@ def test_every_kind_prints_strict_json(kind, tmp_path):
     assert strict_json(res.stdout)["scenario"] == name
 
 
+@pytest.mark.slow
 def test_structure_json_has_no_bare_nan(tmp_path):
-    """The width analysis' ratios to missing paper values are NaN in memory: null in the JSON."""
+    """The width analysis' ratios to missing paper values are NaN in memory: null in the JSON (in the default
+    suite: structure's result.json above and ``finite_json`` below, the function ``--json`` prints with)."""
     res = _cli("run", "structure", "--quick", "--json", "--out", tmp_path / "s")
     assert res.exit_code == 0, res.output
     printed = strict_json(res.stdout)
@@ -154,7 +156,7 @@ def test_only_into_a_campaign_of_another_seed_is_refused(tmp_path):
     spec["campaign"]["workers"] = 1
     campaign.run_many(spec, saved_seed, out, fake_job, lambda *a: None)  # the campaign's folder (runs faked)
     res = _cli("run", "enclosure", "--quick", "--only", "0", "--seed", saved_seed + 5, "--out", out)
-    _one_error_line(res, f"seed (saved {saved_seed}, now {saved_seed + 5})", "--fresh")
+    _one_error_line(res, f"seed (saved {saved_seed}, now {saved_seed + 5})", "the campaign's own --seed")
     assert not (out / "run-0000").exists()
 
 
