@@ -73,3 +73,14 @@ def test_the_shipped_model_is_left_as_written():
     model = sim.load_model()
     for name in ("body_pos", "body_quat", "body_ipos", "site_pos"):
         np.testing.assert_array_equal(getattr(model, name), getattr(raw, name))
+
+
+def test_the_variants_of_a_written_back_model_are_assembled_too(tmp_path):
+    """sim.randomised_model compiles its own MjSpec: its loops are closed like load_model's."""
+    model = sim.randomised_model(3, 0.3, _to_xml(tmp_path))
+    d = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, d)
+    for i in range(1, 5):
+        end, a = (mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{s}{i}") for s in ("rod_end", "A"))
+        assert np.abs(d.site_xpos[end] - d.site_xpos[a]).max() < 1e-14
+    sim.H4Geometry.from_model(model)
