@@ -151,20 +151,38 @@ def _executor(camp: dict):
 
 
 def _stop_executor(executor) -> None:
-    """Cancel what is queued and end the workers now (a process pool's shutdown would wait for them)."""
-    procs = list((getattr(executor, "_processes", None) or {}).values())
-    for proc in procs:
-        try:
-            proc.terminate()
-        except (OSError, AttributeError):
-            pass
-    deadline = time.monotonic() + 3.0
-    for proc in procs:
-        proc.join(max(0.0, deadline - time.monotonic()))
-        if proc.is_alive():
-            proc.kill()
-            proc.join(1.0)
-    executor.shutdown(wait=True, cancel_futures=True)
+    """Cancel what is queued and end the workers now (a process pool's shutdown would wait for them).
+
+    The pool's manager thread, finding its workers gone, marks every pending future broken; on Python < 3.12
+    one cancelled meanwhile makes it raise ``InvalidStateError: CANCELLED`` (printed as "Exception in thread"),
+    so the pool is told to cancel its queue first and that one error of the manager thread is not printed."""
+    manager = getattr(executor, "_executor_manager_thread", None)
+    previous = threading.excepthook
+
+    def hook(args):
+        if not (args.thread is manager and issubclass(args.exc_type, concurrent.futures.InvalidStateError)):
+            previous(args)
+
+    threading.excepthook = hook
+    procs = list((getattr(executor, "_processes", None) or {}).values())  # shutdown forgets them
+    try:
+        executor.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            try:
+                proc.terminate()
+            except (OSError, AttributeError):
+                pass
+        deadline = time.monotonic() + 3.0
+        for proc in procs:
+            proc.join(max(0.0, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)
+        executor.shutdown(wait=True, cancel_futures=True)
+        if manager is not None:
+            manager.join(3.0)
+    finally:
+        threading.excepthook = previous
 
 
 class _TermAsInterrupt:
@@ -198,6 +216,23 @@ def _load_run(path: Path, prov: dict) -> dict | None:
     return data if data.get("provenance") == prov else None
 
 
+def check_same_campaign(out: Path, prov: dict,
+                        hint: str = "Use --fresh to recompute it there, or another --out") -> None:
+    """Refuse (:class:`CampaignMismatchError`, ending with ``hint``) a folder ``out`` holding a campaign of other
+    inputs than ``prov`` (seed, spec, model, code); nothing is refused when ``out`` holds no campaign."""
+    saved_path = Path(out) / "campaign.json"
+    if not saved_path.is_file():
+        return
+    try:
+        saved = json.loads(saved_path.read_text()).get("provenance", {})
+    except ValueError:
+        saved = {}
+    diff = _differences(saved, prov)
+    if diff:
+        raise CampaignMismatchError(
+            f"--out {str(out)!r} holds a campaign computed from other inputs: {'; '.join(diff)}. {hint}")
+
+
 def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = False) -> tuple[list[dict], dict]:
     """Run ``job(spec, index, seed) -> dict`` for every index of ``spec['campaign']['runs']`` into ``out``,
     resuming what matches; returns (runs in index order, info with ``reused``, ``computed``, ``seconds``,
@@ -209,17 +244,14 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     prov = provenance(spec, seed)
     out = prepare_folder(out, what={"scenario": spec["name"], "kind": spec["kind"]})
     saved_path = out / "campaign.json"
-    if saved_path.is_file() and not fresh:
-        try:
-            saved = json.loads(saved_path.read_text()).get("provenance", {})
-        except ValueError:
-            saved = {}
-        diff = _differences(saved, prov)
-        if diff:
-            raise CampaignMismatchError(
-                f"--out {str(out)!r} holds a campaign computed from other inputs: {'; '.join(diff)}. Use --fresh to "
-                "recompute it there, or another --out")
-    (out / "runs").mkdir(exist_ok=True)
+    if not fresh:
+        check_same_campaign(out, prov)
+    try:
+        (out / "runs").mkdir(exist_ok=True)
+    except OSError as exc:
+        from scenarios.rundir import RunFolderError
+
+        raise RunFolderError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from exc
     if fresh:
         for f in (out / "runs").glob("*.json"):
             f.unlink()
@@ -257,10 +289,11 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                     progress(f"campaign (reused {reused})" if reused else "campaign", len(runs) + len(errors), n)
         except KeyboardInterrupt:
             interrupted = True
-            for fut in futures:
-                fut.cancel()
             if client is None:
-                _stop_executor(executor)
+                _stop_executor(executor)  # cancels the queued futures itself
+            else:
+                for fut in futures:
+                    fut.cancel()
             raise CampaignInterrupted(
                 f"interrupted: {len(runs)} of {n} runs are saved in {str(out)!r}; run the same command again to "
                 "resume") from None

@@ -6,6 +6,7 @@ import contextlib
 import importlib.metadata
 import io
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -54,16 +55,40 @@ def main(ctx: typer.Context) -> None:
     ctx.with_resource(native_output_to_stderr())
 
 
+@contextlib.contextmanager
+def native_stderr_captured(sink: list):
+    """What native code (urdfdom's ``Error:`` lines) writes to file descriptor 2 goes to a temporary file; its
+    text is appended to ``sink`` on exit, so a failure can quote it in its one error line."""
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        try:
+            os.dup2(tmp.fileno(), 2)
+            yield sink
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            sink.append(tmp.read().decode("utf-8", "replace"))
+
+
 def _fail(message: str) -> None:
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     raise typer.Exit(2)
 
 
 def _num(x) -> str:
-    """A number in at most 9 characters, 4 significant digits: 0.06074, 12.35, 3.770e-4, 0."""
+    """A number in at most 9 characters, 4 significant digits: 0.06074, 12.35, 3.770e-4, 0; ``-`` for None,
+    ``nan``/``inf``/``-inf`` for non-finite numbers, a text (e.g. a bound named by its rule) as it is."""
     if x is None:
         return "-"
+    if isinstance(x, str):
+        return x
     x = float(x)
+    if not math.isfinite(x):
+        return str(x)
     if x == 0 or 1e-2 <= abs(x) < 1e4:
         return f"{x:.4g}"
     mant, exp = f"{x:.3e}".split("e")
@@ -129,7 +154,9 @@ def _print_summary(result: dict) -> None:
     for table in _summary_tables(result, console.width):
         console.print(table)
     bound = result.get("bound")
-    if isinstance(bound, list):
+    if isinstance(bound, str):  # a bound named by its rule (e.g. the critical bound, per row)
+        console.print(f"bound: {bound}", markup=False)
+    elif isinstance(bound, list):
         console.print("bound per joint: " + ", ".join(_num(b) for b in bound) + " N m")
     elif bound is not None:
         console.print(f"bound: {_num(bound)} N m")
@@ -204,10 +231,17 @@ def run(
                     fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130)
     if as_json:
-        typer.echo(json.dumps(result, indent=2, default=str))
+        typer.echo(_json_text(result))
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
+
+
+def _json_text(result: dict) -> str:
+    """The result as strict JSON (non-finite numbers null, as in result.json)."""
+    from scenarios.rundir import finite_json
+
+    return finite_json(result)
 
 
 @app.command()
@@ -283,7 +317,7 @@ def identify(
     except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))
     if as_json:
-        typer.echo(json.dumps(result, indent=2, default=str))
+        typer.echo(_json_text(result))
     else:
         _print_summary(result)
         if result.get("parameter_expressions"):
@@ -295,9 +329,10 @@ def identify(
             for n, e in zip(result["parameters"], result["parameter_expressions"]):
                 typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
     if result.get("consistent") is False:
-        failed = next(m for m in result["methods"].values() if m.get("status") != "ok")
+        failed = [m for m in result["methods"].values() if m.get("status") != "ok"]
+        smallest = failed[0]["min_bound"] if failed else result["wls"]["consistency"]["min_bound"]
         typer.secho(f"error: the data are inconsistent with the bound (proven); the smallest consistent bound "
-                    f"is {failed['min_bound']:.6g} N m", fg=typer.colors.RED, err=True)
+                    f"is {smallest:.6g} N m", fg=typer.colors.RED, err=True)
         raise typer.Exit(EXIT_INCONSISTENT)
 
 
@@ -313,10 +348,16 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
     from ident.robots.serial import SerialRobot
 
+    native: list = []
     try:
-        n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints
+        with native_stderr_captured(native):
+            n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints
     except (ValueError, RuntimeError) as exc:
-        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}") from None
+        said = " ".join(" ".join(native).split())
+        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}"
+                          + (f" (parser: {said})" if said else "")) from None
+    if "".join(native).strip():
+        sys.stderr.write("".join(native))
     wrist = None
     if coupled_wrist is not None:
         parts = str(coupled_wrist).split(",")
@@ -354,12 +395,14 @@ def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, ou
 def replay(
     file: Path = typer.Argument(..., help="a replay.rrd written by h4bench run"),
     web: bool = typer.Option(False, "--web", help="serve the web viewer instead of the native one"),
+    bind: str = typer.Option("127.0.0.1", help="IP address the viewer's servers listen on (0.0.0.0: every "
+                             "interface, reachable from other machines)"),
 ) -> None:
-    """Open a run's replay in the Rerun viewer."""
+    """Open a run's replay in the Rerun viewer (it stops with this command: Ctrl-C, SIGTERM)."""
     from scenarios.replay import open_viewer
 
     try:
-        open_viewer(file, web=web)
+        open_viewer(file, web=web, bind=bind)
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc))
 

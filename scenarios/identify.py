@@ -203,6 +203,13 @@ def _joint_bounds(bound) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------ identify
 
 
+def _check_processed_bound(rows_bound, bound) -> None:
+    """The filtered rows' bound (the raw bound times the filter's gain) must be finite: else --bound is too large."""
+    if not np.all(np.isfinite(rows_bound)):
+        raise OptionError(f"--bound must be a physical bound [N m]: {np.max(bound):g} overflows to infinity once "
+                          "propagated through the filter (the processed rows' bound); give a smaller finite bound")
+
+
 def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None, out=None,
                  block_samples: int = BLOCK_SAMPLES, torque_timing: str = "hold") -> dict:
     """Identify the 14 parameters from a CSV log and write ``result.json`` in ``out``.
@@ -221,7 +228,9 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     dataset = sim.Dataset.from_csv(path)
     geometry = sim.H4Geometry.from_model(sim.load_model(model))
     settings = ProcessingSettings(dt=dataset.dt, **{**DEFAULTS["processing"], "torque_timing": torque_timing})
-    eq = build_equation(geometry, dataset, b, settings, prior=box_prior, block_samples=block_samples)
+    with np.errstate(over="ignore", invalid="ignore"):
+        eq = build_equation(geometry, dataset, b, settings, prior=box_prior, block_samples=block_samples)
+    _check_processed_bound(eq.bound, b)
     samples = len(dataset)
     del dataset
     uniform = bool(np.all(b == b[0]))
@@ -351,7 +360,9 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     if len(eq) == 0:
         raise sim.DatasetError(f"CSV {str(path)!r} gives no processed row (too short, or too slow: rows below "
                                f"{p['speed_threshold']} rad/s are dropped)")
-    rows_bound = eq.bound(b)
+    with np.errstate(over="ignore", invalid="ignore"):
+        rows_bound = eq.bound(b)
+    _check_processed_bound(rows_bound, b)
     uniform = bool(np.all(b == b[0]))
     t_min = float(ident.min_consistent_bound(eq.W, eq.y, prior))
     result = {
@@ -377,13 +388,40 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     return _estimate_and_write(result, eq.W, eq.y, rows_bound, prior, method, nj, base.names, eq.joint, out)
 
 
+# the Chebyshev LP's upper bound exceeds the smallest consistent scale by at most its tolerance (about 1e-9
+# relative, ident.min_consistent_bound); a scale above 1 + this margin is an inconsistency well beyond it
+WLS_INCONSISTENCY_MARGIN = 1e-6
+
+
+def wls_consistency(W, y, bound, prior, min_bound: float | None = None) -> dict:
+    """Whether some theta in the prior satisfies ``|y - W theta| <= bound`` row by row, by the Chebyshev LP
+    (:func:`ident.min_consistent_bound`) on the rows scaled by their bound: ``scale`` (an upper bound of the
+    smallest factor of the bounds that admits a theta) <= 1 proves them consistent (``consistent`` True); above
+    ``1 + WLS_INCONSISTENCY_MARGIN`` (1000 times the LP's tolerance) they are inconsistent (False), the same
+    verdict as the box methods'; in between, None (not decided). ``min_bound``: the smallest consistent scalar
+    bound of the rows as given [N m] (``min_bound``: already computed, else computed here)."""
+    b = np.broadcast_to(np.asarray(bound, dtype=float), (len(y),))
+    if min_bound is None:
+        min_bound = float(ident.min_consistent_bound(W, y, prior))
+    if np.all(b == b[0]):  # one bound: the scale is min_bound / b, rounded up (still an upper bound)
+        scale = float(np.nextafter(min_bound / b[0], np.inf))
+    else:
+        scale = float(ident.min_consistent_bound(W / b[:, None], y / b, prior))
+    verdict = True if scale <= 1.0 else (False if scale > 1.0 + WLS_INCONSISTENCY_MARGIN else None)
+    return {"consistent": verdict, "scale": scale, "min_bound": float(min_bound),
+            "method": "Chebyshev LP (ident.min_consistent_bound) on the rows scaled by their bound"}
+
+
 def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: int, names, joint_of_row, out) -> dict:
     """WLS or a box method on (W, y, bound) into ``result`` (a proven inconsistency is recorded, with
     ``consistent`` False), then ``result.json`` into the owned folder ``out``; returns ``result``."""
     if method == "wls":
         w = ident.wls(W, y, joints=joints, names=names, joint_of_row=joint_of_row)
         result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
-                         "rel_std_percent": np.asarray(w.rel_std_percent).tolist()}
+                         "rel_std_percent": np.asarray(w.rel_std_percent).tolist(),
+                         "consistency": wls_consistency(W, y, bound, prior,
+                                                        result.get("min_consistent_bound"))}
+        result["consistent"] = result["wls"]["consistency"]["consistent"]
     else:
         t0 = time.perf_counter()
         try:

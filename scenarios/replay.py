@@ -435,12 +435,24 @@ def _check_rrd(path) -> Path:
     return path
 
 
-def viewer_command(path, web: bool = False, port: int | None = None) -> list[str]:
+DEFAULT_BIND = "127.0.0.1"  # the viewer's servers listen on this machine only unless --bind says otherwise
+
+
+def viewer_command(path, web: bool = False, port: int | None = None, bind: str = DEFAULT_BIND) -> list[str]:
     """The ``rerun`` command line that opens ``path`` (checked: exists, .rrd, Rerun header): the native viewer,
-    or with ``web`` the web viewer served over HTTP (``--web-viewer``, port ``port`` or Rerun's 9090)."""
+    or with ``web`` the web viewer served over HTTP (``--web-viewer``, port ``port`` or Rerun's 9090).
+    ``bind``: the IP address its servers listen on (default 127.0.0.1, this machine only; Rerun's own default
+    is every interface, 0.0.0.0); :class:`ReplayError` names ``--bind`` when it is not an IP address."""
+    import ipaddress
+
     path = _check_rrd(path)
+    try:
+        ipaddress.ip_address(str(bind))
+    except ValueError:
+        raise ReplayError(f"--bind must be an IP address (127.0.0.1, 0.0.0.0, ::), got {bind!r}") from None
     exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
     cmd = [exe] if exe else [sys.executable, "-m", "rerun"]
+    cmd += ["--bind", str(bind)]
     if web:
         cmd.append("--web-viewer")
         if port is not None:
@@ -448,15 +460,60 @@ def viewer_command(path, web: bool = False, port: int | None = None) -> list[str
     return cmd + [str(path)]
 
 
-def open_viewer(path, web: bool = False, port: int | None = None) -> int:
-    """Open a replay in the Rerun viewer and wait until it is closed (native) or interrupted (web: serves
-    the web viewer, open the printed URL; Ctrl-C stops it). Raises FileNotFoundError for a missing file,
-    :class:`ReplayError` for a file that is not an .rrd or a viewer that fails to start."""
-    cmd = viewer_command(path, web=web, port=port)
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """Linux: the viewer gets SIGTERM when ``h4bench replay`` dies, however it dies (``PR_SET_PDEATHSIG``)."""
+    import ctypes
+    import signal
+
     try:
-        rc = subprocess.call(cmd)
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)
+    except OSError:
+        pass
+
+
+def run_child(cmd: list[str]) -> int:
+    """Run ``cmd`` and wait; SIGTERM or Ctrl-C of this process ends the child too (terminated, then killed
+    after 3 s), and on Linux the child also dies when this process is killed. Returns its exit status, or 0
+    when stopped by a signal."""
+    import signal
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    main = threading_is_main()
+    previous = signal.signal(signal.SIGTERM, stop) if main else None
+    child = None
+    try:
+        child = subprocess.Popen(cmd, preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)
+        return child.wait()
     except KeyboardInterrupt:
         return 0
+    finally:
+        if child is not None and child.poll() is None:
+            child.terminate()
+            try:
+                child.wait(3.0)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
+        if main:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def threading_is_main() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def open_viewer(path, web: bool = False, port: int | None = None, bind: str = DEFAULT_BIND) -> int:
+    """Open a replay in the Rerun viewer and wait until it is closed (native) or interrupted (web: serves
+    the web viewer on ``bind`` (default 127.0.0.1), open the printed URL; Ctrl-C or SIGTERM stops it, and the
+    viewer dies with this process). Raises FileNotFoundError for a missing file, :class:`ReplayError` for a
+    file that is not an .rrd, a bad ``bind`` or a viewer that fails to start."""
+    cmd = viewer_command(path, web=web, port=port, bind=bind)
+    try:
+        rc = run_child(cmd)
     except OSError as exc:
         raise ReplayError(f"cannot start the Rerun viewer ({' '.join(cmd)}): {exc}") from exc
     if rc != 0:

@@ -28,9 +28,16 @@ class RunFolderError(ValueError):
     """An output folder h4bench may not write (a user's file or folder, an unwritable place)."""
 
 
+def finite_json(obj, indent: int | None = 2) -> str:
+    """``obj`` as strict JSON text: numpy values converted, every non-finite number (NaN, +-inf, e.g. a ratio
+    to a missing paper value) written ``null``, so any JSON parser (``JSON.parse``, ``jq``) reads it."""
+    loose = json.dumps(obj, default=json_default)
+    return json.dumps(json.loads(loose, parse_constant=lambda _: None), indent=indent, allow_nan=False)
+
+
 def write_json(path: Path, obj) -> None:
-    """``obj`` as indented JSON at ``path``, atomically."""
-    atomic_write_bytes(Path(path), json.dumps(obj, indent=2, default=json_default).encode())
+    """``obj`` as indented strict JSON (:func:`finite_json`: non-finite numbers are null) at ``path``, atomically."""
+    atomic_write_bytes(Path(path), finite_json(obj).encode())
 
 
 def is_owned(path: Path) -> bool:
@@ -135,22 +142,42 @@ class OwnedFolder:
         if exc_type is not None:
             shutil.rmtree(self.tmp, ignore_errors=True)
             return
-        check_target(self.target, self.option)  # still ours (or new/empty) at the moment of the swap
         old = self.target.parent / f".{self.target.name}.old-{os.getpid()}"
-        if self.target.is_dir() and not is_owned(self.target):
-            self.target.rmdir()  # empty (checked): nothing of the user's is lost
-        elif self.target.exists():
-            os.replace(self.target, old)
-        os.replace(self.tmp, self.target)
+        try:
+            check_target(self.target, self.option)  # still ours (or new/empty) at the moment of the swap
+            if self.target.is_dir() and not is_owned(self.target):
+                self.target.rmdir()  # empty (checked): nothing of the user's is lost
+            elif self.target.exists():
+                os.replace(self.target, old)
+            os.replace(self.tmp, self.target)
+        except (OSError, RunFolderError) as err:
+            if old.exists() and not self.target.exists():
+                os.replace(old, self.target)  # the previous run folder back in place
+            raise RunFolderError(f"{self.option} {str(self.target)!r} could not be written "
+                                 f"({getattr(err, 'strerror', None) or err}); {keep_finished(self.tmp, self.target)}")
         shutil.rmtree(old, ignore_errors=True)
+
+
+def keep_finished(tmp: Path, target: Path) -> str:
+    """Move a finished run's temporary folder to a visible sibling of ``target`` (``<name>.unsaved-<time>``,
+    never cleaned by h4bench); returns the sentence saying where the result is."""
+    kept = target.parent / f"{target.name}.unsaved-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    try:
+        os.replace(tmp, kept)
+    except OSError:
+        kept = tmp
+    return f"the finished result is kept in {str(kept)!r}"
 
 
 def prepare_folder(target: Path, option: str = "--out", what: dict | None = None) -> Path:
     """Create (or reuse, if ours) a folder that a resumable job fills in place (campaigns); returns it."""
     target = check_target(target, option)
-    target.mkdir(exist_ok=True)
-    if not is_owned(target):
-        _write_marker(target, what or {})
+    try:
+        target.mkdir(exist_ok=True)
+        if not is_owned(target):
+            _write_marker(target, what or {})
+    except OSError as exc:
+        raise RunFolderError(f"{option} {str(target)!r} cannot be written: {exc.strerror or exc}") from exc
     return target
 
 

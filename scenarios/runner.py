@@ -16,6 +16,16 @@ def _noop(stage: str, done: int = 0, total: int = 0) -> None:
     pass
 
 
+def check_model(path) -> None:
+    """Load the H4 model at ``path`` once, before any run (a campaign's workers would each fail on it):
+    :class:`sim.ModelError` (a ValueError) names the file and what is wrong."""
+    import sim
+
+    model = sim.load_model(path)
+    sim.H4Geometry.from_model(model)
+    sim.true_parameters(model)
+
+
 def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | None = None,
                  out: str | Path | None = None, quick: bool = False, progress=None,
                  scheduler: str | None = None, workers: int | None = None, only: int | None = None,
@@ -44,6 +54,12 @@ def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | 
     out = check_target(Path(out) if out is not None else RUNS_DIR / spec["name"])
     progress = progress or _noop
     kind = registry.get(spec["kind"])
+    if not getattr(kind, "USES_MODEL", True):
+        if model is not None:
+            raise ScenarioError(f"--model does not apply to kind {spec['kind']!r} (it does not simulate the H4), got "
+                                f"--model {str(model)!r}")
+    elif spec["model"]:
+        check_model(spec["model"])
     started = time.perf_counter()
     if getattr(kind, "RESUMABLE", False):
         return kind.run(spec, seed, out, progress, only=only, fresh=fresh)

@@ -12,6 +12,9 @@ nine columns typed float64, and ``"numpy"``, numpy's C parser (``numpy.loadtxt``
 benchmark's 1M-row log (``benchmarks/bench_csvlog.py``) arrow is several times faster; both give the same
 arrays (both round decimal text correctly to the nearest binary64).
 
+A gzip-compressed log (``.csv.gz``, recognised by its magic bytes, whatever its name) is read the same way,
+decompressed on the fly (both engines stream it).
+
 Errors are :class:`DatasetError` (a ValueError, also ``sim.DatasetError``) naming the file, and where it applies the column
 and the data row (1-based, the header excluded; blank lines are skipped and not counted). A parser failure
 (rows of unequal length, a non-numeric value) is located by a second, plain-Python pass over the file, so the
@@ -21,6 +24,8 @@ fast path carries no per-row bookkeeping.
 from __future__ import annotations
 
 import csv
+import gzip
+import io
 import itertools
 from pathlib import Path
 
@@ -47,9 +52,28 @@ def columns(n_joints: int = N_JOINTS) -> tuple[str, ...]:
     return ("t",) + tuple(f"q{i}" for i in range(1, n_joints + 1)) + tuple(f"tau{i}" for i in range(1, n_joints + 1))
 
 
+def _is_gzip(path: Path) -> bool:
+    with path.open("rb") as fh:
+        return fh.read(2) == b"\x1f\x8b"
+
+
+def _open_binary(path: Path):
+    """The file's bytes, decompressed when it is gzip."""
+    return gzip.open(path, "rb") if _is_gzip(path) else path.open("rb")
+
+
+def _open_text(path: Path):
+    """The file's text (UTF-8), decompressed when it is gzip; undecodable bytes raise DatasetError later."""
+    return io.TextIOWrapper(_open_binary(path), encoding="utf-8", newline="")
+
+
 def _header(path: Path, delimiter: str, names: tuple[str, ...] = COLUMNS) -> list[str]:
-    with path.open(newline="") as fh:
-        first = fh.readline()
+    try:
+        with _open_text(path) as fh:
+            first = fh.readline()
+    except (UnicodeDecodeError, gzip.BadGzipFile, EOFError, OSError) as exc:
+        raise _error(f"CSV {str(path)!r} must be UTF-8 text (or gzip-compressed UTF-8 text), got unreadable "
+                     f"content: {exc}") from None
     if not first.strip():
         raise _error(f"CSV {str(path)!r} must start with a header row naming the columns {list(names)}, "
                      f"got an empty first line")
@@ -68,7 +92,7 @@ def _count_lines(path: Path) -> int:
     """Upper bound on the data rows: newlines in the file (+1 for a last line without one)."""
     count = 0
     last = b"\n"
-    with path.open("rb") as fh:
+    with _open_binary(path) as fh:
         while chunk := fh.read(_BLOCK_BYTES):
             count += chunk.count(b"\n")
             last = chunk[-1:]
@@ -78,7 +102,7 @@ def _count_lines(path: Path) -> int:
 def _locate_bad_row(path: Path, delimiter: str, header: list[str], names: tuple[str, ...] = COLUMNS) -> str | None:
     """Plain-Python pass: the first data row with a wrong value count or a non-numeric needed value."""
     idx = {c: header.index(c) for c in names}
-    with path.open(newline="") as fh:
+    with _open_text(path) as fh:
         reader = csv.reader(fh, delimiter=delimiter)
         next(reader, None)
         k = 0
@@ -111,21 +135,23 @@ def _arrow_blocks(path: Path, delimiter: str, header: list[str], names: tuple[st
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
+    source = _open_binary(path)
     reader = pacsv.open_csv(
-        path,
+        source,
         read_options=pacsv.ReadOptions(column_names=header, skip_rows=1, block_size=_ARROW_BLOCK_BYTES),
         parse_options=pacsv.ParseOptions(delimiter=delimiter),
         convert_options=pacsv.ConvertOptions(column_types={c: pa.float64() for c in names},
                                              include_columns=list(names), strings_can_be_null=False),
     )
-    for batch in reader:
-        # nulls (empty cells, "nan", "NA", ...) become NaN and are reported by _check_block
-        yield [batch.column(c).to_numpy(zero_copy_only=False) for c in names]
+    with source:
+        for batch in reader:
+            # nulls (empty cells, "nan", "NA", ...) become NaN and are reported by _check_block
+            yield [batch.column(c).to_numpy(zero_copy_only=False) for c in names]
 
 
 def _numpy_blocks(path: Path, delimiter: str, header: list[str], names: tuple[str, ...] = COLUMNS):
     cols = [header.index(c) for c in names]
-    with path.open(newline="") as fh:
+    with _open_text(path) as fh:
         fh.readline()
         while True:
             lines = list(itertools.islice(fh, _NUMPY_BLOCK_ROWS))
@@ -163,7 +189,10 @@ def read_log(path, delimiter: str = ",", engine: str = "arrow", n_joints: int = 
     nj = int(n_joints)
     names = columns(nj)
     header = _header(path, delimiter, names)
-    capacity = _count_lines(path)
+    try:
+        capacity = _count_lines(path)
+    except (OSError, EOFError) as exc:  # a truncated or corrupt gzip stream
+        raise _error(f"CSV {str(path)!r} cannot be read to its end: {exc}") from None
     t = np.empty(capacity)
     q = np.empty((capacity, nj))
     tau = np.empty((capacity, nj))
@@ -181,10 +210,13 @@ def read_log(path, delimiter: str = ",", engine: str = "arrow", n_joints: int = 
             q[n:n + m] = np.column_stack(cols[1:1 + nj])
             tau[n:n + m] = np.column_stack(cols[1 + nj:])
             n += m
-    except ValueError as exc:
+    except (ValueError, OSError, EOFError) as exc:  # a truncated gzip: EOFError / BadGzipFile (an OSError)
         if isinstance(exc, DatasetError):
             raise
-        where = _locate_bad_row(path, delimiter, header, names)
+        try:
+            where = _locate_bad_row(path, delimiter, header, names)
+        except (ValueError, OSError, EOFError) as again:
+            where = f"unreadable content ({again})"
         raise _error(f"CSV {str(path)!r}: {where or exc}") from exc
     if n == 0:
         raise _error(f"CSV {str(path)!r} must have data rows after the header, got none")

@@ -96,21 +96,29 @@ def _check_series(name: str, arr, n: int | None, width: int = 4) -> np.ndarray:
     return arr
 
 
-def _check_time(t) -> np.ndarray:
+def _check_time(t, source: str | None = None) -> np.ndarray:
+    """t (n,) [s], finite, strictly increasing and uniform to 1 %. ``source``: the CSV file the samples came
+    from; the errors then name it and the 1-based data rows (the header excluded), else 0-based samples."""
     t = np.asarray(t, dtype=float)
+
+    def at(k: int) -> str:
+        return f"data row {k + 1}" if source else f"t[{k}]"
+
+    where = f"CSV {source!r}: column t" if source else "t"
     if t.ndim != 1 or t.size < 3:
-        raise DatasetError(f"t must be a 1-D array of at least 3 sample times, got shape {t.shape}")
+        raise DatasetError(f"{where} must be a 1-D array of at least 3 sample times, got shape {t.shape}")
     if not np.all(np.isfinite(t)):
-        raise DatasetError(f"t must be finite, got NaN/inf at sample {int(np.flatnonzero(~np.isfinite(t))[0])}")
+        raise DatasetError(f"{where} must be finite, got NaN/inf at {at(int(np.flatnonzero(~np.isfinite(t))[0]))}")
     dt = np.diff(t)
     if np.any(dt <= 0):
         k = int(np.flatnonzero(dt <= 0)[0]) + 1
-        raise DatasetError(f"t must be strictly increasing, got t[{k}] = {t[k]} after t[{k - 1}] = {t[k - 1]}")
+        raise DatasetError(f"{where} must be strictly increasing, got {float(t[k])!r} s at {at(k)} after {float(t[k - 1])!r} s "
+                           f"at {at(k - 1)}")
     med = np.median(dt)
     if np.max(np.abs(dt - med)) > 0.01 * med:
         k = int(np.argmax(np.abs(dt - med))) + 1
-        raise DatasetError(f"t must be uniformly sampled (1 % tolerance), got a step of {dt[k - 1]:.6g} s at sample {k} "
-                           f"against a median of {med:.6g} s")
+        raise DatasetError(f"{where} must be uniformly sampled (1 % tolerance), got a step of {dt[k - 1]:.6g} s "
+                           f"between {at(k - 1)} and {at(k)} against a median of {med:.6g} s")
     return t
 
 
@@ -161,7 +169,7 @@ class Dataset:
         columns are ignored), in bounded memory (:func:`sim.csvlog.read_log`). Errors name the file, the
         column or the sample."""
         t, q, tau = read_log(path, delimiter)
-        return cls(t, q, tau, {"source": "csv", "path": str(path)})
+        return cls(_check_time(t, str(path)), q, tau, {"source": "csv", "path": str(path)})
 
 
 @dataclass

@@ -29,6 +29,8 @@ MOTOR_JOINTS = ("q1", "q2", "q3", "q4")
 NACELLE_JOINTS = ("x", "y", "z", "theta")
 FOREARM_RODS = ("forearm_rod1", "forearm_rod2", "forearm_rod3", "forearm_rod4")
 INVWEIGHT_SCALE_NAME = "h4_invweight_scale"
+LOOP_TOLERANCE = 1e-4  # [m] largest loop gap at qpos0 that load_model closes (a rounded file); more is refused
+_LOOP_EXACT = 1e-12  # [m] a gap below this is left as written
 
 
 class ModelError(ValueError):
@@ -48,8 +50,62 @@ def load_model(path: str | Path | None = None) -> mujoco.MjModel:
     except Exception as exc:  # mujoco raises ValueError with the compiler's message
         raise ModelError(f"model path {str(path)!r} is not a valid MJCF model: {exc}") from exc
     _check_structure(model, path)
+    assemble_loops(model, path)
     apply_solver_constants(model)
     return model
+
+
+def assemble_loops(model: mujoco.MjModel, path="the model") -> float:
+    """Close the four loops of a compiled H4 at ``qpos0`` exactly, in place; returns the largest gap found [m].
+
+    A model written back by MuJoCo (``MjSpec.to_xml``, ``mj_saveLastXML``: 6 significant digits) leaves each
+    forearm rod's far end ``rod_end_i`` up to ~1e-6 m off its nacelle point ``A_i``. When a gap is at most
+    :data:`LOOP_TOLERANCE` (0.1 mm, far below any physical tolerance of the robot yet far above rounding), the
+    rod frame is solved from the compiled geometry: the rod starts at the arm tip ``B_i``, its orientation is
+    the smallest rotation of the written one putting its local +x axis along ``A_i - B_i``, its length
+    ``|A_i - B_i|`` moves ``rod_end_i`` (and the rod's centre of mass when it sat at the rod end: the point
+    mass) onto ``A_i``. A larger gap raises :class:`ModelError` naming the rod and the gap. Gaps below 1e-12 m
+    are left as written (the shipped model is unchanged). Call :func:`apply_solver_constants` afterwards."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = model.qpos0
+    mujoco.mj_kinematics(model, data)
+    worst = 0.0
+    for i, name in enumerate(FOREARM_RODS):
+        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{s}{i + 1}") for s in ("B", "A", "rod_end")]
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if min(ids) < 0 or body < 0:
+            continue  # H4Geometry.from_model names what is missing
+        b_site, a_site, end = ids
+        arm = model.body_parentid[body]
+        start_gap = float(np.abs(data.xpos[body] - data.site_xpos[b_site]).max())
+        end_gap = float(np.abs(data.site_xpos[end] - data.site_xpos[a_site]).max())
+        worst = max(worst, start_gap, end_gap)
+        if max(start_gap, end_gap) <= _LOOP_EXACT:
+            continue
+        if model.site_bodyid[b_site] != arm or start_gap > LOOP_TOLERANCE or end_gap > LOOP_TOLERANCE:
+            raise ModelError(f"model {str(path)!r} must be assembled closed at qpos0: forearm rod {name!r} starts "
+                             f"{start_gap:.3g} m from B{i + 1} and ends {end_gap:.3g} m from A{i + 1}; up to "
+                             f"{LOOP_TOLERANCE:g} m (a rounded file) is closed at load, more is a different robot")
+        model.body_pos[body] = model.site_pos[b_site]
+        mujoco.mj_kinematics(model, data)
+        arm_rot = data.xmat[arm].reshape(3, 3)
+        v = arm_rot.T @ (data.site_xpos[a_site] - data.xpos[body])  # B -> A in the arm frame
+        length = float(np.linalg.norm(v))
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, model.body_quat[body])
+        x0, t = rot.reshape(3, 3)[:, 0], v / length
+        axis = np.cross(x0, t)
+        sin, cos = float(np.linalg.norm(axis)), float(x0 @ t)
+        if sin > 0.0:
+            turn, quat = np.zeros(4), np.zeros(4)
+            mujoco.mju_axisAngle2Quat(turn, axis / sin, np.arctan2(sin, cos))
+            mujoco.mju_mulQuat(quat, turn, model.body_quat[body])
+            model.body_quat[body] = quat / np.linalg.norm(quat)
+        if np.abs(model.body_ipos[body] - model.site_pos[end]).max() <= LOOP_TOLERANCE:
+            model.body_ipos[body] = (length, 0.0, 0.0)
+        model.site_pos[end] = (length, 0.0, 0.0)
+        mujoco.mj_kinematics(model, data)
+    return worst
 
 
 def apply_solver_constants(model: mujoco.MjModel) -> mujoco.MjModel:

@@ -14,6 +14,7 @@ from sim.model import (
     ModelError,
     _check_structure,
     apply_solver_constants,
+    assemble_loops,
 )
 
 
@@ -30,6 +31,7 @@ def _spec(path) -> mujoco.MjSpec:
 def _compile(spec: mujoco.MjSpec, path) -> mujoco.MjModel:
     model = spec.compile()
     _check_structure(model, path)
+    assemble_loops(model, path)  # a model written back by MuJoCo (6 digits), as sim.load_model
     return apply_solver_constants(model)
 
 

@@ -9,7 +9,9 @@ settings, targets, nominal parameters, the remaining design options and the sour
 (:data:`CODE_FILES`, so an edit invalidates old entries). Files are written atomically (temp file +
 ``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
 and inputs, and passes :func:`trajectories.check_trajectory` again on the caller's geometry and limits;
-otherwise it is recomputed and overwritten (never trusted).
+otherwise it is recomputed and overwritten (never trusted). A cache that cannot be written (a read-only
+folder, ``H4BENCH_CACHE`` naming a file) never costs a run: the design is returned uncached and a
+:class:`CacheWarning` says why.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -38,6 +41,10 @@ CODE_FILES = ("bounded.py", "checks.py", "design.py", "excitation.py", "fourier.
 #: headroom); 40 SLSQP iterations: the smooth max reached 0.754 / 0.739 (seeds 0 / 1) against 0.754 / 0.743 at
 #: 60 and 0.779 / 0.796 at 25, in about half the time of 60.
 DEFAULT_OPTIONS = {"harmonics": 4, "base_hz": 0.75, "max_iter": 40}
+
+
+class CacheWarning(UserWarning):
+    """The trajectory cache could not be written; the design was used without it."""
 
 
 def cache_dir() -> Path:
@@ -149,6 +156,11 @@ def design_excitation(geometry, duration: float = 10.0, seed: int = 0, limits=No
     traj = Trajectory(t=traj.t, x=traj.x, q=traj.q, qd=traj.qd, qdd=traj.qdd, kind=traj.kind, parameters=params,
                       checks=traj.checks)
     if cache:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        traj.save(path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            traj.save(path)
+        except OSError as exc:
+            warnings.warn(f"the trajectory cache {str(path.parent)!r} cannot be written ({exc.strerror or exc}); "
+                          f"the design is used without caching it (set {CACHE_ENV} to a writable folder)",
+                          CacheWarning, stacklevel=2)
     return traj

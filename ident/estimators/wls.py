@@ -106,12 +106,12 @@ def wls(W, y, joints: int = 4, *, names=None, joint_of_row=None) -> WLSResult:
         th_j, _, rank_j, _ = np.linalg.lstsq(Wj, yj, rcond=None)
         dof_j = Wj.shape[0] - int(rank_j)
         if dof_j < 1:
-            raise ValueError(f"joint {j} needs more rows than the rank of its regressor ({rank_j}), got {Wj.shape[0]} rows")
+            raise ValueError(f"joint {j + 1} needs more rows than the rank of its regressor ({rank_j}), got {Wj.shape[0]} rows")
         ss = float(np.sum((yj - Wj @ th_j) ** 2))
         sigma[j] = np.sqrt(ss / dof_j)
         if not sigma[j] > 1e-12 * np.sqrt(np.mean(yj**2)):
             raise ValueError(
-                f"joint {j}: the OLS residual of its own rows is at rounding level (sigma = {sigma[j]:.3g}), so its "
+                f"joint {j + 1}: the OLS residual of its own rows is at rounding level (sigma = {sigma[j]:.3g}), so its "
                 "weight 1/sigma is undefined (noise-free data?)"
             )
 

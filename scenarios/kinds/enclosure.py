@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from scenarios import report
-from scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
+from scenarios.campaign import campaign_experiment, check_same_campaign, provenance, run_many, summarise, write_outputs
 from scenarios.rundir import OwnedFolder, save_run_files, write_json
 from scenarios.spec import ScenarioError
 
@@ -45,6 +45,8 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
     if only is not None:
         if not 0 <= only < spec["campaign"]["runs"]:
             raise ScenarioError(f"only must be a run index in [0, {spec['campaign']['runs']}), got {only}")
+        check_same_campaign(out, provenance(spec, seed),  # run `only` of this campaign, not of another seed
+                            "Give the campaign's own --seed (and options), or another --out")
         with OwnedFolder(Path(out) / f"run-{only:04d}", option="--only") as tmp:
             result = replay_one(spec, only, seed, tmp, progress)
             write_json(tmp / "result.json", result)

@@ -483,6 +483,9 @@ def report_text(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+USES_MODEL = False  # the TX40 comes from its URDF and logs: an H4 --model does not apply
+
+
 def run(spec: dict, seed: int, out: Path, progress) -> dict:
     """Registry entry point: the study, then result files (report.md, PNG plots) in ``out``."""
     result, art = run_tx40(spec["tx40"], seed, progress)

@@ -109,7 +109,7 @@ def test_bad_input_is_rejected_with_a_message_naming_the_argument(W, y, joints, 
 
 def test_noise_free_joint_has_no_weight():
     W = np.random.default_rng(0).standard_normal((40, 2))
-    with pytest.raises(ValueError, match="joint 0: the OLS residual"):
+    with pytest.raises(ValueError, match="joint 1: the OLS residual"):
         ident.wls(W, W @ np.array([1.0, 2.0]), joints=4)
 
 

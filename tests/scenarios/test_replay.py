@@ -7,9 +7,11 @@ project's estimators; the boxes come from an independent naive exact hull (one s
 from __future__ import annotations
 
 import dataclasses
+import os
 import subprocess
 import sys
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +22,8 @@ from scenarios.experiment import run_experiment
 from scenarios.replay import RRD_MAGIC, TIMELINE, ReplayError, box_history, viewer_command, write_replay
 from scenarios.spec import load_spec
 from tests.conftest import cartesian_reference
+
+ROOT = Path(__file__).resolve().parents[2]
 
 SECONDS = 2.0
 POINTS = 4
@@ -269,6 +273,53 @@ def test_viewer_command_checks_the_file(rrd, tmp_path):
     assert native[-1] == str(rrd) and "--web-viewer" not in native
     web = viewer_command(rrd, web=True, port=9191)
     assert web[-4:] == ["--web-viewer", "--web-viewer-port", "9191", str(rrd)]
+    # this machine only unless asked (Rerun's own default is 0.0.0.0, every interface)
+    for cmd in (native, web):
+        assert cmd[cmd.index("--bind") + 1] == "127.0.0.1"
+    anywhere = viewer_command(rrd, web=True, bind="0.0.0.0")
+    assert anywhere[anywhere.index("--bind") + 1] == "0.0.0.0"
+    with pytest.raises(ReplayError, match="--bind must be an IP address.*'localhost:80'"):
+        viewer_command(rrd, bind="localhost:80")
+
+
+_VIEWER_PARENT = """
+import sys
+import scenarios.replay as replay
+child = [sys.executable, "-c", "import time; print('viewer up', flush=True); time.sleep(120)"]
+replay.viewer_command = lambda *a, **k: child  # a stand-in for rerun (same process tree)
+replay.open_viewer(sys.argv[1])
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process checks via ps and /proc")
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGKILL"])
+def test_the_viewer_dies_with_h4bench_replay(tmp_path, rrd, how):
+    import signal
+    import time
+
+    (tmp_path / "parent.py").write_text(_VIEWER_PARENT)
+    proc = subprocess.Popen([sys.executable, str(tmp_path / "parent.py"), str(rrd)], stdout=subprocess.PIPE,
+                            text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert proc.stdout.readline().strip() == "viewer up"
+    children = subprocess.run(["ps", "-o", "pid=", "--ppid", str(proc.pid)], capture_output=True,
+                              text=True).stdout.split()
+    assert len(children) == 1
+    child = int(children[0])
+    proc.send_signal(getattr(signal, how))
+    proc.wait(timeout=10)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            break
+        status = Path(f"/proc/{child}/status")
+        if status.exists() and "\nState:\tZ" in status.read_text():
+            break
+        time.sleep(0.1)
+    else:
+        os.kill(child, signal.SIGKILL)
+        pytest.fail(f"the viewer (pid {child}) outlived h4bench replay ({how})")
 
 
 def test_rerun_is_imported_lazily():

@@ -66,8 +66,41 @@ def test_csv_nan(tmp_path):
 def test_csv_non_monotonic_time(tmp_path):
     rows = [[k * 1e-3] + [0.0] * 8 for k in range(10)]
     rows[6][0] = rows[5][0]
-    with pytest.raises(sim.DatasetError, match=r"strictly increasing, got t\[6\]"):
+    # the file and the 1-based data rows (the header excluded): rows[6] is data row 7
+    with pytest.raises(sim.DatasetError, match=r"log\.csv'.*column t must be strictly increasing, got 0\.005 s at "
+                                              r"data row 7 after 0\.005 s at data row 6"):
         sim.Dataset.from_csv(_write_csv(tmp_path / "log.csv", HEADER, rows))
+    rows = [[k * 1e-3 + (0.5e-3 if k >= 6 else 0.0)] + [0.0] * 8 for k in range(10)]  # one long step
+    with pytest.raises(sim.DatasetError, match=r"log\.csv'.*uniformly sampled.*between data row 6 and data row 7"):
+        sim.Dataset.from_csv(_write_csv(tmp_path / "log.csv", HEADER, rows))
+
+
+@pytest.mark.parametrize("engine", ["arrow", "numpy"])
+def test_gzip_log_reads_as_the_plain_one(tmp_path, engine):
+    """Oracle: the same text uncompressed; a .csv.gz is recognised by its content, not its name."""
+    import gzip
+    import shutil
+
+    from sim.csvlog import read_log
+
+    rng = np.random.default_rng(0)
+    rows = [[k * 1e-3] + list(rng.standard_normal(8)) for k in range(3000)]
+    plain = _write_csv(tmp_path / "log.csv", HEADER, rows)
+    with plain.open("rb") as src, gzip.open(tmp_path / "log.csv.gz", "wb") as dst:
+        shutil.copyfileobj(src, dst)
+    shutil.copy(tmp_path / "log.csv.gz", tmp_path / "renamed.csv")
+    for a, b, c in zip(read_log(plain, engine=engine), read_log(tmp_path / "log.csv.gz", engine=engine),
+                       read_log(tmp_path / "renamed.csv", engine=engine)):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)
+    ds = sim.Dataset.from_csv(tmp_path / "log.csv.gz")
+    assert len(ds) == 3000
+    (tmp_path / "cut.csv.gz").write_bytes((tmp_path / "log.csv.gz").read_bytes()[:2000])  # truncated
+    with pytest.raises(sim.DatasetError, match=r"cut\.csv\.gz"):
+        read_log(tmp_path / "cut.csv.gz", engine=engine)
+    (tmp_path / "bin.csv").write_bytes(b"\x8b\xff\xfe" * 10)
+    with pytest.raises(sim.DatasetError, match=r"bin\.csv.*UTF-8"):
+        read_log(tmp_path / "bin.csv", engine=engine)
 
 
 def test_csv_missing_file(tmp_path):

@@ -173,6 +173,29 @@ def test_design_excitation_cache(geometry, tmp_path, monkeypatch):
     assert calls == [1, 1, 1, 1]
 
 
+def test_an_unwritable_cache_never_costs_the_design(geometry, tmp_path, monkeypatch):
+    """H4BENCH_CACHE naming a file (NotADirectoryError) or a read-only folder: the design is returned, same as
+    uncached, with a CacheWarning naming the folder."""
+    kw = dict(processing=PAPER_PROCESSING, max_iter=2)
+    reference = tj.design_excitation(geometry, 3.0, seed=4, cache=False, **kw)
+    (tmp_path / "a-file").write_text("not a folder")
+    monkeypatch.setenv("H4BENCH_CACHE", str(tmp_path / "a-file"))
+    with pytest.warns(tx.CacheWarning, match="a-file/trajectories.*cannot be written"):
+        got = tj.design_excitation(geometry, 3.0, seed=4, **kw)
+    assert all(np.array_equal(getattr(got, n), getattr(reference, n)) for n in ("t", "x", "q", "qd", "qdd"))
+    monkeypatch.setenv("H4BENCH_CACHE", str(tmp_path / "ro"))
+    real_save = tj.Trajectory.save
+
+    def refuse(self, path):  # a read-only folder (root ignores permission bits, so the refusal is simulated)
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(tj.Trajectory, "save", refuse)
+    with pytest.warns(tx.CacheWarning, match="ro/trajectories.*Permission denied"):
+        got = tj.design_excitation(geometry, 3.0, seed=4, **kw)
+    assert got.equals(reference) or np.array_equal(got.q, reference.q)
+    monkeypatch.setattr(tj.Trajectory, "save", real_save)
+
+
 def test_design_excitation_rejects_bad_arguments(geometry):
     with pytest.raises(ValueError, match="criterion"):
         tj.design_excitation(geometry, 3.0, criterion="volume")
