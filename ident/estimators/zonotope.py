@@ -64,6 +64,21 @@ def _reduce(G: np.ndarray, keep: int) -> np.ndarray:
     return np.concatenate([G[:, idx], np.diag(A[:, rest].sum(axis=1))], axis=1)
 
 
+def _cut(w, c, G, yk, bk, rel):
+    """One strip against the set ``c + G xi``: ``G^T w`` (m,), ``w . c``, the set's half-range along w and the
+    strip's part ``[slo, shi]`` inside that range, the strip widened by a rounding safeguard (not a proof)."""
+    Gw = G.T @ w
+    wc = float(w @ c)
+    r = float(np.abs(Gw).sum())
+    pad = rel * (abs(yk) + bk + float(np.abs(w) @ np.abs(c)) + r)
+    return Gw, wc, r, max(yk - bk - pad, wc - r), min(yk + bk + pad, wc + r)
+
+
+def _misses(what: str, k: int, W, y, b, prior):
+    return inconsistent(f"the {what} misses the strip of row {k}: the data appear inconsistent with the prior and "
+                        "the bound", W, y, b, prior)
+
+
 def _zonotope(W, y, bound, prior, order: int) -> Box:
     W, y, b, lo, hi, names = check_inputs(W, y, bound, prior)
     N, p = W.shape
@@ -78,15 +93,9 @@ def _zonotope(W, y, bound, prior, order: int) -> Box:
     cuts = 0
     for k in range(N):
         w = W[k]
-        Gw = G.T @ w  # (m,)
-        wc = float(w @ c)
-        r = float(np.abs(Gw).sum())
-        pad = rel * (abs(y[k]) + b[k] + float(np.abs(w) @ np.abs(c)) + r)  # rounding safeguard (not a proof)
-        slo = max(y[k] - b[k] - pad, wc - r)
-        shi = min(y[k] + b[k] + pad, wc + r)
+        Gw, wc, r, slo, shi = _cut(w, c, G, y[k], b[k], rel)
         if slo > shi:
-            raise inconsistent(f"the zonotope misses the strip of row {k}: the data appear inconsistent with the prior "
-                               "and the bound", W, y, b, prior)
+            raise _misses("zonotope", k, W, y, b, prior)
         if slo <= wc - r and shi >= wc + r:
             continue  # the strip contains the zonotope's range: no cut
         yk = 0.5 * (slo + shi)
@@ -186,15 +195,9 @@ def parallelotope(W, y, bound, prior) -> Box:
     cuts = 0
     for k in range(N):
         w = W[k]
-        Gw = G.T @ w
-        wc = float(w @ c)
-        r = float(np.abs(Gw).sum())
-        pad = rel * (abs(y[k]) + b[k] + float(np.abs(w) @ np.abs(c)) + r)  # rounding safeguard (not a proof)
-        slo = max(y[k] - b[k] - pad, wc - r)
-        shi = min(y[k] + b[k] + pad, wc + r)
+        Gw, wc, r, slo, shi = _cut(w, c, G, y[k], b[k], rel)
         if slo > shi:
-            raise inconsistent(f"the parallelotope misses the strip of row {k}: the data appear inconsistent with "
-                               "the prior and the bound", W, y, b, prior)
+            raise _misses("parallelotope", k, W, y, b, prior)
         bk = 0.5 * (shi - slo)
         j = int(np.argmax(np.abs(Gw)))
         if not bk < abs(Gw[j]):
