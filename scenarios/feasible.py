@@ -1,0 +1,234 @@
+"""The feasible set in the plane: projections onto pairs of parameters, every method's set beside it, and the plots.
+
+* :func:`feasible_set`: outer polygons of the feasible set's projections (:mod:`ident.estimators.projection`,
+  safe support bounds in K directions, refined towards the exact projection) onto the given pairs or the most
+  coupled ones, as the ``feasible_set`` entry of ``result.json``;
+* :func:`reference_sets`: the boxes (and ``info["set"]``) of the estimators drawn beside it, resolved from the
+  registry (the spec's methods plus the bounding ellipsoid, the zonotope and a statistical reference when
+  registered); a method that fails or is not available is skipped with its reason;
+* :func:`plot_feasible_set` (``feasible_set.png``: a panel per pair with the polygon, each method's box, the
+  ellipsoids' ellipses, the zonotopes' zonogons, the truth) and :func:`plot_prediction` (a held-out torque against
+  its guaranteed envelopes).
+
+matplotlib is imported lazily, inside the plotting functions.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ident.errors import EstimatorError, InconsistentDataError
+from ident.estimators import registry
+from ident.estimators.projection import ellipse_points, projections, zonogon
+
+__all__ = ["EXTRA_METHODS", "feasible_set", "parse_pairs", "plot_feasible_set", "plot_prediction", "reference_sets"]
+
+#: drawn beside the spec's methods when registered: the bounding ellipsoid, the zonotope, a statistical reference
+#: (the first of ``wls``, ``ols`` that is registered)
+EXTRA_METHODS = ("ellipsoid", "zonotope", ("wls", "ols"))
+_COLORS = {"hull": "black", "cgsp": "tab:orange", "ellipsoid": "tab:blue", "zonotope": "tab:purple",
+           "parallelotope": "tab:pink", "contractor": "tab:brown", "wls": "tab:red", "ols": "tab:red",
+           "iv": "tab:olive"}
+_OTHER = ("tab:cyan", "tab:gray", "gold", "tab:olive")
+
+
+def parse_pairs(text: str, names, option: str = "--pairs") -> list[tuple[int, int]]:
+    """``"Fv1:Fs1,Imot1:Mnac"`` -> ``[(i, j), ...]`` parameter indices; ValueError naming ``option`` otherwise."""
+    names = list(names)
+    out = []
+    for item in str(text).split(","):
+        item = item.strip()
+        if not item:
+            continue
+        parts = [s.strip() for s in item.split(":")]
+        if len(parts) != 2 or parts[0] == parts[1]:
+            raise ValueError(f"{option}: expected pairs of two different parameters NAME:NAME separated by commas, "
+                             f"got {item!r}")
+        for s in parts:
+            if s not in names:
+                raise ValueError(f"{option}: unknown parameter {s!r} in {item!r} (parameters: {', '.join(names)})")
+        out.append((names.index(parts[0]), names.index(parts[1])))
+    if not out:
+        raise ValueError(f"{option}: expected at least one pair NAME:NAME, got {text!r}")
+    return out
+
+
+def drawn_methods(spec_methods) -> list[str]:
+    """The spec's methods plus :data:`EXTRA_METHODS` that are registered (names, no duplicates)."""
+    out = list(dict.fromkeys(m for m in spec_methods if isinstance(m, str)))
+    known = set(registry.BUILTINS)
+    for extra in EXTRA_METHODS:
+        for name in (extra if isinstance(extra, tuple) else (extra,)):
+            if name in known:
+                if name not in out:
+                    out.append(name)
+                break
+    return out
+
+
+def reference_sets(W, y, bound, prior, methods, *, boxes: dict | None = None, groups=None) -> tuple[dict, dict, dict]:
+    """Each method's Box (its ``info["set"]`` kept), reusing ``boxes`` already computed.
+
+    W (N, p), y (N,), bound (N,) [units of y]; prior a Box; methods names or callables of the registry;
+    groups (N,) the row's joint (passed to the estimators that accept it). Returns ``(boxes, seconds, skipped)``:
+    name -> Box, name -> seconds, name -> why it is not drawn (not registered, failed, proven empty).
+    """
+    out, seconds, skipped = dict(boxes or {}), {}, {}
+    for m in methods:
+        name = m if isinstance(m, str) else getattr(m, "__name__", str(m))
+        if name in out:
+            continue
+        t0 = time.perf_counter()
+        try:
+            est = registry.get(m)
+            ctx = {"groups": groups} if groups is not None else {}
+            out[name] = registry.call(est, W, y, bound, prior, **ctx)
+        except (EstimatorError, InconsistentDataError, ValueError, TypeError, ArithmeticError) as exc:
+            skipped[name] = f"{type(exc).__name__}: {exc}"
+        seconds[name] = time.perf_counter() - t0
+    return out, seconds, skipped
+
+
+def feasible_set(W, y, bound, box, names, pairs=None, *, count: int = 3, directions: int = 32, refine: int = 3,
+                 engine=None) -> tuple[list, dict]:
+    """Outer polygons of the projections of ``S = {theta in box : |y - W theta| <= bound}`` onto pairs.
+
+    box : a Box containing S (the hull: the polygons' axis extents are then its intervals); names (p,);
+    pairs : ``[(i, j), ...]`` or None for the ``count`` most coupled pairs (1 - octagon area / box area);
+    directions : K (a multiple of 4); refine : rounds of refinement towards the exact projection.
+    Returns ``(polygons, entry)`` with ``entry`` the ``feasible_set`` of ``result.json``: ``{"pairs": [
+    {"parameters", "vertices" (counter-clockwise), "directions", "gap", "area", "inner_area"}, ...],
+    "selection", "scores", "seconds", "lp_solves", "lp_failures"}``.
+    """
+    polys, info = projections(W, y, bound, box, pairs, count=count, directions=directions, refine=refine,
+                              names=names, engine=engine)
+    entry = {"pairs": [q.to_json() for q in polys], "selection": info["selection"], "scores": info.get("scores", {}),
+             "seconds": info["seconds"], "lp_solves": info["lp_solves"], "lp_failures": info["lp_failures"],
+             "refine": int(refine)}
+    return polys, entry
+
+
+def _color(name: str, k: int) -> str:
+    return _COLORS.get(name, _OTHER[k % len(_OTHER)])
+
+
+def _set_outline(box, i: int, j: int):
+    """The projected outline of a method's ``info["set"]`` (ellipse or zonogon) or None."""
+    s = (box.info or {}).get("set") if hasattr(box, "info") else None
+    if not isinstance(s, dict):
+        return None, None
+    try:
+        if s.get("type") == "ellipsoid":
+            return ellipse_points(s["center"], s["shape"], i, j), "ellipse"
+        if s.get("type") == "zonotope":
+            return zonogon(s["center"], s["generators"], i, j), "zonogon"
+    except (KeyError, ValueError, IndexError, np.linalg.LinAlgError):
+        return None, None
+    return None, None
+
+
+def plot_feasible_set(polygons, sets: dict, truth, path: Path, *, units=None, title: str | None = None,
+                      kinds: dict | None = None, prior=None) -> None:
+    """``feasible_set.png``: one panel per pair with the polygon (filled), each method's box (rectangle), the
+    projection of its ``info["set"]`` (ellipse or zonogon, dashed), the truth (a star, when given).
+
+    polygons : list of :class:`ident.estimators.projection.Polygon`; sets : name -> Box; truth : (p,) or None;
+    units : (p,) unit strings; kinds : name -> "guaranteed" / "statistical" (the legend says which); prior : a Box
+    cutting the view (each panel shows the polygon with a margin of 60 % of its extent).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Polygon as Patch
+    from matplotlib.patches import Rectangle
+
+    n = max(len(polygons), 1)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.8 * rows), squeeze=False)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    for ax, poly in zip(axes.ravel(), polygons):
+        i, j = poly.indices
+        v = poly.vertices
+        ax.add_patch(Patch(v, closed=True, facecolor="tab:green", alpha=0.35, edgecolor="darkgreen", lw=1.5,
+                           label=f"feasible set ({poly.directions} directions)"))
+        for k, (name, box) in enumerate(sets.items()):
+            col = _color(name, k)
+            kind = (kinds or {}).get(name, "")
+            tag = f"{name} box" + (" (95 % conf.)" if kind == "statistical" else "")
+            lo, hi = box.lower[[i, j]], box.upper[[i, j]]
+            ax.add_patch(Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fill=False, edgecolor=col,
+                                   lw=1.2, label=tag))
+            outline, what = _set_outline(box, i, j)
+            if outline is not None:
+                closed = np.vstack([outline, outline[:1]])
+                ax.plot(closed[:, 0], closed[:, 1], ls="--", color=col, lw=1.0, label=f"{name} {what}")
+        if truth is not None:
+            ax.plot(truth[i], truth[j], marker="*", ms=12, color="red", mec="k", ls="none", label="truth")
+        # the view: the hull's box (the polygon's extent) with a margin, cut by the prior's; a set larger than the
+        # view is listed in the corner with its widths relative to the polygon's extent
+        lo_v, hi_v = v.min(axis=0), v.max(axis=0)
+        pad = 0.6 * np.maximum(hi_v - lo_v, 1e-300)
+        view_lo, view_hi = lo_v - pad, hi_v + pad
+        if prior is not None:
+            view_lo = np.maximum(view_lo, prior.lower[[i, j]])
+            view_hi = np.minimum(view_hi, prior.upper[[i, j]])
+        ax.set_xlim(view_lo[0], view_hi[0])
+        ax.set_ylim(view_lo[1], view_hi[1])
+        notes = []
+        for name, box in sets.items():
+            lo, hi = box.lower[[i, j]], box.upper[[i, j]]
+            if np.any(lo < view_lo) or np.any(hi > view_hi):
+                r = (hi - lo) / np.maximum(hi_v - lo_v, 1e-300)
+                notes.append(f"{name}: {r[0]:.3g}x, {r[1]:.3g}x")
+        if notes:
+            ax.text(0.98, 0.98, "box width / polygon's:\n" + "\n".join(notes), transform=ax.transAxes, ha="right",
+                    va="top", fontsize=7, bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
+        xl, yl = poly.parameters
+        if units is not None:
+            xl, yl = f"{xl} [{units[i]}]", f"{yl} [{units[j]}]"
+        ax.set_xlabel(xl)
+        ax.set_ylabel(yl)
+        ax.grid(alpha=0.3)
+        ax.set_title(f"{poly.parameters[0]} vs {poly.parameters[1]}", fontsize=10)
+    handles, labels = axes.ravel()[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 5), fontsize=8, frameon=False)
+    fig.suptitle(title or "Projections of the feasible set (outer polygons from safe LP bounds)")
+    fig.tight_layout(rect=(0, 0.08 + 0.02 * (len(labels) > 5), 1, 0.95))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_prediction(t, measured, poly_lo, poly_hi, box_lo, box_hi, bound, path: Path, *, joint: str = "joint 1",
+                    title: str | None = None) -> None:
+    """The measured held-out torque of one joint against its guaranteed envelopes widened by the bound.
+
+    t (k,) [s]; measured (k,) [N m]; poly_lo, poly_hi (k,) the polytope envelope; box_lo, box_hi (k,) the box's
+    (interval evaluation); bound (k,) or scalar [N m].
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    b = np.broadcast_to(np.asarray(bound, dtype=float), np.shape(t))
+    fig, ax = plt.subplots(figsize=(10, 4.2))
+    dt = float(np.median(np.diff(t))) if np.size(t) > 1 else 1.0
+    ax.bar(t, (box_hi + b) - (box_lo - b), bottom=box_lo - b, width=0.8 * dt, color="tab:orange", alpha=0.35,
+           label="hull box envelope + bound")
+    ax.bar(t, (poly_hi + b) - (poly_lo - b), bottom=poly_lo - b, width=0.5 * dt, color="tab:green", alpha=0.7,
+           label="feasible-set envelope + bound")
+    ax.plot(t, measured, ".", ms=3, color="k", label="measured (held out)")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"torque {joint} [N m]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set_title(title or f"Guaranteed torque on a held-out motion, {joint}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
