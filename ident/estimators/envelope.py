@@ -61,13 +61,12 @@ def envelope_lp(W, y, bound, lower, upper, W_new, *, center=None, lp_tol: float 
     box_lo, box_hi = point_matvec(W_new, lower, upper)
     lo_out, hi_out = np.array(box_lo, dtype=float), np.array(box_hi, dtype=float)
     engine = SupportLP(W, y, b, lower, upper, center=center, lp_tol=lp_tol)
-    lps = 0
-    for k in range(W_new.shape[0]):
-        if not np.any(W_new[k]):
-            continue  # a zero row: its range is {0}, already the interval evaluation's
+    todo = [k for k in range(W_new.shape[0]) if np.any(W_new[k])]  # a zero row's range is {0}: the box's
+    for k in todo:  # all minima in the rows' order, then all maxima in reverse: consecutive optima are close
         lo_out[k] = max(lo_out[k], engine.minimize(W_new[k])[0])
+    for k in reversed(todo):
         hi_out[k] = min(hi_out[k], engine.maximize(W_new[k])[0])
-        lps += 2
+    lps = 2 * len(todo)
     info = {"lps": lps, "lp_solves": engine.solves, "lp_failures": engine.failures, "working_rows": int(engine.idx.size),
             "seconds": time.perf_counter() - t0}
     return lo_out, hi_out, info

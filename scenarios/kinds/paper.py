@@ -87,7 +87,8 @@ def _inside(poly, point) -> bool:
 
 
 def subsample_rows(joint, rows: int) -> np.ndarray:
-    """Sorted indices of about ``rows`` rows, the same number from each joint, evenly spaced within it."""
+    """Indices of about ``rows`` rows, the same number from each joint, evenly spaced within it, joint by joint
+    (each in time order: consecutive envelope LPs then have close optima, so the warm starts are cheap)."""
     joint = np.asarray(joint)
     groups = np.unique(joint)
     per = max(1, int(rows) // max(groups.size, 1))
@@ -95,11 +96,14 @@ def subsample_rows(joint, rows: int) -> np.ndarray:
     for g in groups:
         idx = np.flatnonzero(joint == g)
         out.append(idx[np.unique(np.linspace(0, idx.size - 1, min(per, idx.size)).round().astype(np.int64))])
-    return np.sort(np.concatenate(out)) if out else np.zeros(0, dtype=np.int64)
+    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
-def held_out_prediction(run_, seed: int, out: Path, progress=None) -> dict:
-    """Simulate the held-out motion of ``seed`` on the same robot, process it the same way, bound its torques."""
+def held_out_prediction(run_, seed: int, out: Path, progress=None, arrays: dict | None = None) -> dict:
+    """Simulate the held-out motion of ``seed`` on the same robot, process it the same way, bound its torques.
+
+    arrays : a dict that receives the held-out rows and envelopes (``W``, ``y``, ``bound``, ``polytope``
+    ``(lo, hi)``, ``box`` ``(lo, hi)``) when given. Returns the ``prediction`` entry of ``result.json``."""
     from ident.estimators.envelope import envelope_lp
     from ident.numerics.interval import down, point_matvec, up
     from scenarios.feasible import plot_prediction
@@ -122,6 +126,8 @@ def held_out_prediction(run_, seed: int, out: Path, progress=None) -> dict:
         return (y2 >= down(lo - b2)) & (y2 <= up(hi + b2))
 
     inside_p, inside_b = coverage(lo_p, hi_p), coverage(lo_b, hi_b)
+    if arrays is not None:
+        arrays.update(W=W2, y=y2, bound=b2, polytope=(lo_p, hi_p), box=(lo_b, hi_b))
     r_true = np.abs(y2 - W2 @ run_.theta_true)
     pred_true = W2 @ run_.theta_true
     joint = np.asarray(ho.joint)[rows]

@@ -1,0 +1,93 @@
+"""The paper kind's feasible set and held-out prediction (quick size) against independent oracles.
+
+Oracles: the truth (feasible whenever the bound covers the oracle residual, so inside every polygon and every
+envelope), the hull's intervals (the polygons' axis extents), scipy's linprog on the same LPs (the envelope on a
+sample of rows), and the interval evaluation over the hull box (never narrower than the polytope's envelope).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from scenarios import spec as specs
+from scenarios.experiment import run_experiment
+from scenarios.feasible import drawn_methods, parse_pairs
+from scenarios.kinds import paper
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("feasible")
+    spec = specs.load_spec("paper", quick=True)
+    run_ = run_experiment(spec, 0)
+    feas = paper.feasible_set(run_, out)
+    arrays = {}
+    pred = paper.held_out_prediction(run_, 0 + spec["prediction"]["seed_offset"], out, arrays=arrays)
+    return run_, feas, pred, arrays, out
+
+
+def test_polygons_contain_the_truth_and_span_the_hull(quick):
+    run_, feas, _, _, out = quick
+    assert (out / "feasible_set.png").stat().st_size > 10_000
+    hull = run_.boxes["hull"]
+    names = list(run_.equation.names)
+    r = np.abs(run_.residual)
+    assert np.all(r <= run_.equation.bound)  # the truth is feasible in this run, so it lies in every projection
+    assert len(feas["pairs"]) == 3 and feas["lp_failures"] == 0
+    json.dumps(feas)  # plain JSON
+    for pj in feas["pairs"]:
+        i, j = (names.index(n) for n in pj["parameters"])
+        v = np.asarray(pj["vertices"])
+        assert pj["directions"] >= 32 and pj["area"] > 0 and pj["truth_inside"]
+        for col, k in ((0, i), (1, j)):
+            tol = 1e-7 * (hull.upper[k] - hull.lower[k])
+            assert v[:, col].min() == pytest.approx(hull.lower[k], abs=tol)
+            assert v[:, col].max() == pytest.approx(hull.upper[k], abs=tol)
+        assert pj["gap"] < 1e-2 and pj["inner_area"] <= pj["area"]
+    assert set(drawn_methods(run_.spec["estimators"]["methods"])) <= set(feas["methods_drawn"]) | set(
+        feas["methods_skipped"])
+
+
+def test_prediction_covers_and_equals_linprog(quick):
+    run_, _, pred, arrays, out = quick
+    assert (out / "prediction.png").stat().st_size > 10_000
+    assert pred["rows"] == arrays["W"].shape[0] > 0 and pred["seed"] == 100
+    if pred["bound_covers_residual"]:
+        assert pred["coverage"] == 1.0 and pred["truth_in_envelope"] == 1.0  # the guarantee
+    lo_p, hi_p = arrays["polytope"]
+    lo_b, hi_b = arrays["box"]
+    assert np.all(lo_b <= lo_p) and np.all(hi_p <= hi_b)
+    assert pred["envelope_width_median"]["polytope"] < pred["envelope_width_median"]["box"]
+    eq, hull = run_.equation, run_.boxes["hull"]
+    A = np.vstack([eq.W, -eq.W])
+    rhs = np.concatenate([eq.y + eq.bound, eq.bound - eq.y])
+    bounds = list(zip(hull.lower, hull.upper))
+    for k in np.linspace(0, pred["rows"] - 1, 5).astype(int):
+        w = arrays["W"][k]
+        res_lo = linprog(w, A_ub=A, b_ub=rhs, bounds=bounds, method="highs")
+        res_hi = linprog(-w, A_ub=A, b_ub=rhs, bounds=bounds, method="highs")
+        assert res_lo.status == 0 and res_hi.status == 0
+        scale = np.abs(w) @ (hull.upper - hull.lower)
+        assert lo_p[k] <= res_lo.fun + 1e-9 * scale and hi_p[k] >= -res_hi.fun - 1e-9 * scale  # outer
+        assert lo_p[k] == pytest.approx(res_lo.fun, abs=1e-6 * scale)  # and tight
+        assert hi_p[k] == pytest.approx(-res_hi.fun, abs=1e-6 * scale)
+
+
+def test_parse_pairs_and_spec_checks(tmp_path):
+    names = ["Fv1", "Fs1", "Mnac"]
+    assert parse_pairs("Fv1:Fs1, Mnac:Fv1", names) == [(0, 1), (2, 0)]
+    for bad, what in (("Fv1", "NAME:NAME"), ("Fv1:Fv1", "different"), ("Fv1:Xx", "unknown parameter 'Xx'"),
+                      ("", "at least one")):
+        with pytest.raises(ValueError, match=what):
+            parse_pairs(bad, names)
+    for table, line, what in (("feasible", "directions = 10", "feasible.directions"),
+                              ("feasible", "pairs = ['Fv1-Fs1']", "feasible.pairs"),
+                              ("prediction", "joint = 5", "prediction.joint")):
+        path = tmp_path / f"{what}.toml"
+        path.write_text(f"kind = 'paper'\n[{table}]\n{line}\n")
+        with pytest.raises(specs.ScenarioError, match=what):
+            specs.load_spec(path)
