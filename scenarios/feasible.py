@@ -232,3 +232,24 @@ def plot_prediction(t, measured, poly_lo, poly_hi, box_lo, box_hi, bound, path: 
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def identify_projections(folder: Path, W, y, bound, prior, names, pairs, *, box=None, method: str | None = None,
+                         units=None) -> dict:
+    """``h4bench identify --pairs``: the projections of the data's feasible set, ``feasible_set.png`` in ``folder``.
+
+    W (N, p), y (N,), bound (N,) [N m]; prior a Box; names (p,); pairs ``[(i, j), ...]`` or None (the most
+    coupled); box : the method's box when it is guaranteed (``method`` its name; drawn, and the LPs' box when
+    it is the hull), else the prior. Returns the ``feasible_set`` entry of ``result.json``.
+    """
+    start = box if (box is not None and method == "hull") else prior
+    polys, entry = feasible_set(W, y, bound, start, list(names), pairs)
+    sets = {method: box} if box is not None and method else {}
+    plot_feasible_set(polys, sets, None, Path(folder) / "feasible_set.png", units=units, prior=prior,
+                      title="Projections of the data's feasible set (outer polygons from safe LP bounds)")
+    return entry
+
+
+def pairs_option(text, names) -> list[tuple[int, int]] | None:
+    """``--pairs``: ``auto`` (None: the most coupled pairs) or ``NAME:NAME,...`` (:func:`parse_pairs`)."""
+    return None if str(text).strip() == "auto" else parse_pairs(text, names, "--pairs")

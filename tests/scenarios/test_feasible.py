@@ -91,3 +91,48 @@ def test_parse_pairs_and_spec_checks(tmp_path):
         path.write_text(f"kind = 'paper'\n[{table}]\n{line}\n")
         with pytest.raises(specs.ScenarioError, match=what):
             specs.load_spec(path)
+
+
+def _identify(csv, out, *args):
+    from typer.testing import CliRunner
+
+    from scenarios.cli import app
+
+    return CliRunner().invoke(app, ["identify", str(csv), "--bound", "1.5", "--out", str(out), *map(str, args)])
+
+
+@pytest.fixture(scope="module")
+def log_csv(quick, tmp_path_factory):
+    ds = quick[0].dataset
+    path = tmp_path_factory.mktemp("log") / "log.csv"
+    np.savetxt(path, np.column_stack([ds.t, ds.q, ds.tau]), delimiter=",", header="t,q1,q2,q3,q4,tau1,tau2,tau3,tau4",
+               comments="", fmt="%.17g")
+    return path
+
+
+def test_identify_pairs_draws_the_projections(log_csv, tmp_path):
+    res = _identify(log_csv, tmp_path / "a", "--pairs", "Fv1:Fs1,Imot1:Mnac")
+    assert res.exit_code == 0, res.output
+    result = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert (tmp_path / "a" / "feasible_set.png").stat().st_size > 10_000
+    pairs = result["feasible_set"]["pairs"]
+    assert [p["parameters"] for p in pairs] == [["Fv1", "Fs1"], ["Imot1", "Mnac"]]
+    hull, names = result["methods"]["hull"], result["parameters"]
+    for pj in pairs:
+        v = np.asarray(pj["vertices"])
+        for col, name in enumerate(pj["parameters"]):
+            k = names.index(name)
+            tol = 1e-7 * (hull["upper"][k] - hull["lower"][k])
+            assert v[:, col].min() == pytest.approx(hull["lower"][k], abs=tol)
+            assert v[:, col].max() == pytest.approx(hull["upper"][k], abs=tol)
+    res = _identify(log_csv, tmp_path / "b", "--pairs", "auto", "--method", "cgsp")
+    assert res.exit_code == 0, res.output
+    result = json.loads((tmp_path / "b" / "result.json").read_text())
+    assert len(result["feasible_set"]["pairs"]) == 3 and result["feasible_set"]["selection"].startswith("most")
+
+
+def test_identify_bad_pairs_is_one_error_line(log_csv, tmp_path):
+    res = _identify(log_csv, tmp_path / "c", "--pairs", "Fv1:Xx")
+    assert res.exit_code == 2
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: --pairs") and "'Xx'" in lines[0], res.output
