@@ -6,6 +6,7 @@
 * :func:`reference_sets`: the boxes (and ``info["set"]``) of the estimators drawn beside it, resolved from the
   registry (the spec's methods plus the bounding ellipsoid, the zonotope and a statistical reference when
   registered); a method that fails or is not available is skipped with its reason;
+* :func:`polygon_history`: the polygons from the first k seconds of data (the replay's 2D views);
 * :func:`plot_feasible_set` (``feasible_set.png``: a panel per pair with the polygon, each method's box, the
   ellipsoids' ellipses, the zonotopes' zonogons, the truth) and :func:`plot_prediction` (a held-out torque against
   its guaranteed envelopes).
@@ -24,7 +25,8 @@ from ident.errors import EstimatorError, InconsistentDataError
 from ident.estimators import registry
 from ident.estimators.projection import ellipse_points, projections, zonogon
 
-__all__ = ["EXTRA_METHODS", "feasible_set", "parse_pairs", "plot_feasible_set", "plot_prediction", "reference_sets"]
+__all__ = ["EXTRA_METHODS", "drawn_methods", "feasible_set", "identify_projections", "pairs_option", "parse_pairs",
+           "plot_feasible_set", "plot_prediction", "polygon_history", "reference_sets"]
 
 #: drawn beside the spec's methods when registered: the bounding ellipsoid, the zonotope, a statistical reference
 #: (the first of ``wls``, ``ols`` that is registered)
@@ -253,3 +255,47 @@ def identify_projections(folder: Path, W, y, bound, prior, names, pairs, *, box=
 def pairs_option(text, names) -> list[tuple[int, int]] | None:
     """``--pairs``: ``auto`` (None: the most coupled pairs) or ``NAME:NAME,...`` (:func:`parse_pairs`)."""
     return None if str(text).strip() == "auto" else parse_pairs(text, names, "--pairs")
+
+
+def polygon_history(run, pairs, history: dict, directions: int = 16, refine: int = 1) -> dict:
+    """Each pair's outer polygon of the feasible set from the first k seconds of data, at the box history's k.
+
+    run : an :class:`scenarios.experiment.ExperimentRun`; pairs : ``[(name_i, name_j), ...]``; history : a
+    :func:`scenarios.replay.box_history` result (its k, and its hull boxes as the LPs' boxes; a k where the
+    hull did not run is left out); directions, refine : :func:`ident.estimators.projection.project_pair`. The
+    rows for k are those of the box history. Returns ``{"pairs", "indices", "lower", "width"`` (the final hull
+    box of each pair: the unit square of the replay's plane), ``"polygons"`` (per pair, per k: (V, 2) vertices or None where the
+    data of that k were not usable), ``"boxes"`` (per pair, per k: (lower (2,), upper (2,)) or None),
+    ``"time"``, ``"seconds"}``.
+    """
+    from ident.estimators.projection import project_pair
+    from ident.estimators.support import SupportLP
+
+    t0 = time.perf_counter()
+    eq, t = run.equation, np.asarray(run.dataset.t, dtype=float)
+    names = list(eq.names)
+    idx = [(names.index(a), names.index(b)) for a, b in pairs]
+    span = float(t[-1] - t[0])
+    row_age = t[np.asarray(eq.sample, dtype=int)] - t[0]
+    tol = 1e-9 * max(span, 1.0)
+    hull = history["methods"].get("hull")
+    final = run.boxes.get("hull", run.prior)
+    npts = len(history["k"])
+    polys = [[None] * npts for _ in idx]
+    boxes = [[None] * npts for _ in idx]
+    for j, kj in enumerate(history["k"]):
+        sel = np.flatnonzero(row_age <= kj + tol) if j < npts - 1 else np.arange(len(eq))
+        if hull is None or not hull["ok"][j] or sel.size < len(names):
+            continue  # no hull for these data (too few rows, or proven empty): nothing to project
+        lo, hi = hull["lower"][j], hull["upper"][j]
+        try:
+            engine = SupportLP(eq.W[sel], eq.y[sel], eq.bound[sel], lo, hi)
+            for n, (a, b) in enumerate(idx):
+                polys[n][j] = project_pair(engine, a, b, directions=directions, refine=refine, names=names).vertices
+                boxes[n][j] = (lo[[a, b]], hi[[a, b]])
+        except ValueError:  # an LP HiGHS rejects: that k is left out
+            continue
+    lower = [final.lower[[a, b]] for a, b in idx]
+    width = [np.maximum(final.upper[[a, b]] - final.lower[[a, b]], 1e-300) for a, b in idx]
+    return {"pairs": [tuple(p) for p in pairs], "indices": idx, "lower": lower, "width": width, "polygons": polys,
+            "boxes": boxes, "time": history["time"], "seconds": time.perf_counter() - t0}

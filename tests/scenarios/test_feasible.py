@@ -136,3 +136,36 @@ def test_identify_bad_pairs_is_one_error_line(log_csv, tmp_path):
     assert res.exit_code == 2
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: --pairs") and "'Xx'" in lines[0], res.output
+
+
+def test_replay_polygons_shrink_as_data_arrive(quick, tmp_path):
+    from scenarios.replay import box_history, write_replay
+    from tests.scenarios.test_replay import read_rrd
+
+    run_, feas, _, _, _ = quick
+    run_.feasible = feas
+    history = box_history(run_, methods=("hull",), points=3)
+    content = read_rrd(write_replay(run_, tmp_path / "replay.rrd", history=history))
+    ok = history["methods"]["hull"]["ok"]
+    names = list(run_.equation.names)
+    hull = run_.boxes["hull"]
+    for pj in feas["pairs"]:
+        a, b = pj["parameters"]
+        i, j = names.index(a), names.index(b)
+        entry = content[f"/feasible/{a}_{b}/polygon"]
+        np.testing.assert_allclose(entry["t"], history["time"][ok], atol=1e-9)  # the box history's k
+        lo = hull.lower[[i, j]]
+        w = hull.upper[[i, j]] - lo
+        truth = (run_.theta_true[[i, j]] - lo) / w
+        areas = []
+        for row in entry["LineStrips2D:strips"]:
+            v = np.asarray(row[0], dtype=float)[:-1]  # closed strip: the first vertex repeated
+            e = np.roll(v, -1, axis=0) - v
+            cross = e[:, 0] * (truth[1] - v[:, 1]) - e[:, 1] * (truth[0] - v[:, 0])
+            assert np.all(cross >= -1e-6)  # the truth (feasible for every prefix of the rows) inside each polygon
+            areas.append(0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
+        assert areas[-1] < areas[0]  # more data, a smaller set
+        # the last polygon spans the final hull box: the unit square of the replay's plane
+        last = np.asarray(entry["LineStrips2D:strips"][-1][0], dtype=float)
+        np.testing.assert_allclose([last.min(axis=0), last.max(axis=0)], [[0, 0], [1, 1]], atol=1e-6)
+        assert f"/feasible/{a}_{b}/hull" in content and f"/feasible/{a}_{b}/true" in content
