@@ -132,77 +132,91 @@ def _set_outline(box, i: int, j: int):
     return None, None
 
 
+def _panel(ax, poly, sets, truth, kinds, units, view_lo, view_hi, notes: bool) -> None:
+    """One pair's panel: the polygon, each method's box and set outline, the truth, in the view given."""
+    from matplotlib.patches import Polygon as Patch
+    from matplotlib.patches import Rectangle
+
+    i, j = poly.indices
+    v = poly.vertices
+    ax.add_patch(Patch(v, closed=True, facecolor="tab:green", alpha=0.35, edgecolor="darkgreen", lw=1.5,
+                       label=f"feasible set (outer polygon, {poly.directions} directions)", zorder=3))
+    for k, (name, box) in enumerate(sets.items()):
+        col = _color(name, k)
+        tag = f"{name} box" + (" (95 % confidence)" if (kinds or {}).get(name) == "statistical" else "")
+        lo, hi = box.lower[[i, j]], box.upper[[i, j]]
+        ax.add_patch(Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fill=False, edgecolor=col, lw=1.3,
+                               label=tag, zorder=4))
+        outline, what = _set_outline(box, i, j)
+        if outline is not None:
+            closed = np.vstack([outline, outline[:1]])
+            ax.plot(closed[:, 0], closed[:, 1], ls="--", color=col, lw=1.0, label=f"{name} {what}", zorder=4)
+    if truth is not None:
+        ax.plot(truth[i], truth[j], marker="*", ms=12, color="red", mec="k", ls="none", label="truth", zorder=5)
+    ax.set_xlim(view_lo[0], view_hi[0])
+    ax.set_ylim(view_lo[1], view_hi[1])
+    if notes:  # the sets larger than the view, with their widths relative to the polygon's extent
+        ext = np.maximum(np.ptp(v, axis=0), 1e-300)
+        lines = [f"{name}: {(box.upper[[i, j]] - box.lower[[i, j]])[0] / ext[0]:.3g}x, "
+                 f"{(box.upper[[i, j]] - box.lower[[i, j]])[1] / ext[1]:.3g}x" for name, box in sets.items()
+                 if np.any(box.lower[[i, j]] < view_lo) or np.any(box.upper[[i, j]] > view_hi)]
+        if lines:
+            ax.text(0.98, 0.98, "box width / polygon's:\n" + "\n".join(lines), transform=ax.transAxes, ha="right",
+                    va="top", fontsize=7, zorder=6, bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "0.7"})
+    xl, yl = poly.parameters
+    if units is not None:
+        xl, yl = f"{xl} [{units[i]}]", f"{yl} [{units[j]}]"
+    ax.set_xlabel(xl)
+    ax.set_ylabel(yl)
+    ax.grid(alpha=0.3)
+
+
 def plot_feasible_set(polygons, sets: dict, truth, path: Path, *, units=None, title: str | None = None,
                       kinds: dict | None = None, prior=None) -> None:
-    """``feasible_set.png``: one panel per pair with the polygon (filled), each method's box (rectangle), the
-    projection of its ``info["set"]`` (ellipse or zonogon, dashed), the truth (a star, when given).
+    """``feasible_set.png``: per pair, two panels: a close view (the polygon with a margin of 60 % of its extent)
+    and a wide view (every method's box, cut by the prior), each with the polygon (filled), each method's box
+    (rectangle), the projection of its ``info["set"]`` (ellipse or zonogon, dashed) and the truth (a star).
 
     polygons : list of :class:`ident.estimators.projection.Polygon`; sets : name -> Box; truth : (p,) or None;
     units : (p,) unit strings; kinds : name -> "guaranteed" / "statistical" (the legend says which); prior : a Box
-    cutting the view (each panel shows the polygon with a margin of 60 % of its extent).
+    cutting the views.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Polygon as Patch
-    from matplotlib.patches import Rectangle
 
     n = max(len(polygons), 1)
     cols = min(n, 3)
-    rows = -(-n // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.8 * rows), squeeze=False)
-    for ax in axes.ravel()[n:]:
-        ax.set_visible(False)
-    for ax, poly in zip(axes.ravel(), polygons):
+    blocks = -(-n // cols)
+    fig, axes = plt.subplots(2 * blocks, cols, figsize=(5.2 * cols, 4.4 * 2 * blocks), squeeze=False)
+    for k in range(blocks * cols):
+        close, wide = axes[2 * (k // cols), k % cols], axes[2 * (k // cols) + 1, k % cols]
+        if k >= len(polygons):
+            close.set_visible(False)
+            wide.set_visible(False)
+            continue
+        poly = polygons[k]
         i, j = poly.indices
         v = poly.vertices
-        ax.add_patch(Patch(v, closed=True, facecolor="tab:green", alpha=0.35, edgecolor="darkgreen", lw=1.5,
-                           label=f"feasible set ({poly.directions} directions)"))
-        for k, (name, box) in enumerate(sets.items()):
-            col = _color(name, k)
-            kind = (kinds or {}).get(name, "")
-            tag = f"{name} box" + (" (95 % conf.)" if kind == "statistical" else "")
-            lo, hi = box.lower[[i, j]], box.upper[[i, j]]
-            ax.add_patch(Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fill=False, edgecolor=col,
-                                   lw=1.2, label=tag))
-            outline, what = _set_outline(box, i, j)
-            if outline is not None:
-                closed = np.vstack([outline, outline[:1]])
-                ax.plot(closed[:, 0], closed[:, 1], ls="--", color=col, lw=1.0, label=f"{name} {what}")
-        if truth is not None:
-            ax.plot(truth[i], truth[j], marker="*", ms=12, color="red", mec="k", ls="none", label="truth")
-        # the view: the hull's box (the polygon's extent) with a margin, cut by the prior's; a set larger than the
-        # view is listed in the corner with its widths relative to the polygon's extent
+        p_lo = prior.lower[[i, j]] if prior is not None else np.full(2, -np.inf)
+        p_hi = prior.upper[[i, j]] if prior is not None else np.full(2, np.inf)
         lo_v, hi_v = v.min(axis=0), v.max(axis=0)
         pad = 0.6 * np.maximum(hi_v - lo_v, 1e-300)
-        view_lo, view_hi = lo_v - pad, hi_v + pad
-        if prior is not None:
-            view_lo = np.maximum(view_lo, prior.lower[[i, j]])
-            view_hi = np.minimum(view_hi, prior.upper[[i, j]])
-        ax.set_xlim(view_lo[0], view_hi[0])
-        ax.set_ylim(view_lo[1], view_hi[1])
-        notes = []
-        for name, box in sets.items():
-            lo, hi = box.lower[[i, j]], box.upper[[i, j]]
-            if np.any(lo < view_lo) or np.any(hi > view_hi):
-                r = (hi - lo) / np.maximum(hi_v - lo_v, 1e-300)
-                notes.append(f"{name}: {r[0]:.3g}x, {r[1]:.3g}x")
-        if notes:
-            ax.text(0.98, 0.98, "box width / polygon's:\n" + "\n".join(notes), transform=ax.transAxes, ha="right",
-                    va="top", fontsize=7, bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
-        xl, yl = poly.parameters
-        if units is not None:
-            xl, yl = f"{xl} [{units[i]}]", f"{yl} [{units[j]}]"
-        ax.set_xlabel(xl)
-        ax.set_ylabel(yl)
-        ax.grid(alpha=0.3)
-        ax.set_title(f"{poly.parameters[0]} vs {poly.parameters[1]}", fontsize=10)
-    handles, labels = axes.ravel()[0].get_legend_handles_labels()
+        _panel(close, poly, sets, truth, kinds, units, np.maximum(lo_v - pad, p_lo), np.minimum(hi_v + pad, p_hi),
+               True)
+        close.set_title(f"{poly.parameters[0]} vs {poly.parameters[1]}: close view", fontsize=10)
+        all_lo = np.min([lo_v] + [b.lower[[i, j]] for b in sets.values()], axis=0)
+        all_hi = np.max([hi_v] + [b.upper[[i, j]] for b in sets.values()], axis=0)
+        span = np.maximum(all_hi - all_lo, 1e-300)
+        _panel(wide, poly, sets, truth, kinds, units, np.maximum(all_lo - 0.04 * span, p_lo),
+               np.minimum(all_hi + 0.04 * span, p_hi), False)
+        wide.set_title(f"{poly.parameters[0]} vs {poly.parameters[1]}: every method's box", fontsize=10)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 5), fontsize=8, frameon=False)
     fig.suptitle(title or "Projections of the feasible set (outer polygons from safe LP bounds)")
-    fig.tight_layout(rect=(0, 0.08 + 0.02 * (len(labels) > 5), 1, 0.95))
-    fig.savefig(path, dpi=110)
+    fig.tight_layout(rect=(0, 0.05 + 0.015 * (len(labels) > 5), 1, 0.96))
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 

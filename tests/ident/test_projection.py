@@ -146,3 +146,25 @@ def test_bad_arguments():
         P.project_pair(eng, 0, 1, directions=10)
     with pytest.raises(ValueError, match="different"):
         P.project_pair(eng, 1, 1)
+
+
+def test_coupling_scores_separate_coupled_from_independent_pairs():
+    """Rows on (theta1, theta2) and rows on (theta3, theta4) only: the set is a product, so its projection onto
+    (theta1, theta3) is a rectangle (score 0), while theta1 and theta2 share one strongly correlated column."""
+    rng = np.random.default_rng(4)
+    m = 200
+    a = rng.standard_normal((m, 1))
+    A = np.hstack([a, 0.95 * a + 0.05 * rng.standard_normal((m, 1))])
+    B = rng.standard_normal((m, 2))
+    W = np.block([[A, np.zeros((m, 2))], [np.zeros((m, 2)), B]])
+    theta = np.array([1.0, 1.2, 0.8, 1.1])
+    b = np.full(2 * m, 0.3)
+    y = W @ theta + rng.uniform(-1, 1, 2 * m) * b
+    hull = ident.estimate(W, y, b, ident.Box(np.zeros(4), 3 * np.ones(4)), method="hull")
+    eng = SupportLP(W, y, b, hull.lower, hull.upper)
+    full = P.coupling_scores(eng)
+    assert full[0, 2] == pytest.approx(0.0, abs=1e-6) and full[1, 3] == pytest.approx(0.0, abs=1e-6)
+    assert full[0, 1] > 0.3 and full[0, 1] == full[1, 0]
+    screened = P.coupling_scores(eng, candidates=2)
+    assert P.most_coupled_pairs(screened, 1) == P.most_coupled_pairs(full, 1) == [(0, 1)]
+    assert np.count_nonzero(np.triu(screened, 1)) <= 2
