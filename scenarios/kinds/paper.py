@@ -27,18 +27,26 @@ DESCRIPTION = "the paper's Table 1 (boxes) and Table 2 (WLS) beside the truth"
 def run(spec: dict, seed: int, out: Path, progress) -> dict:
     progress("experiment", 0, 1)
     run_ = run_experiment(spec, seed, progress=sim_progress(progress))
-    extra = []
-    if spec["feasible"]["enabled"] and "hull" in run_.boxes:
-        progress("feasible set", 0, 1)
-        run_.feasible = feasible_set(run_, out)
-        extra.append(feasible_lines(run_.feasible))
-    if spec["prediction"]["enabled"] and "hull" in run_.boxes:
-        progress("held-out prediction", 0, 1)
-        run_.prediction = held_out_prediction(run_, seed + spec["prediction"]["seed_offset"], out,
-                                              progress=sim_progress(progress))
-        extra.append(prediction_lines(run_.prediction))
+    extra, skipped = [], {}
+    why = None if "hull" in run_.boxes else run_.failures.get("hull", "the spec's methods do not include hull")
+    if spec["feasible"]["enabled"]:
+        if why is None:
+            progress("feasible set", 0, 1)
+            run_.feasible = feasible_set(run_, out)
+            extra.append(feasible_lines(run_.feasible))
+        else:
+            skipped["feasible_set"] = {"pairs": [], "skipped": f"no hull box: {why}"}
+    if spec["prediction"]["enabled"]:
+        if why is None:
+            progress("held-out prediction", 0, 1)
+            run_.prediction = held_out_prediction(run_, seed + spec["prediction"]["seed_offset"], out,
+                                                  progress=sim_progress(progress))
+            extra.append(prediction_lines(run_.prediction))
+        else:
+            skipped["prediction"] = {"skipped": f"no hull box: {why}"}
     save_run_files(run_, out, progress)
     result = run_.result()
+    result.update(skipped)
     for key in ("feasible", "prediction"):
         entry = getattr(run_, key, None)
         if entry is not None:
@@ -164,7 +172,7 @@ def feasible_lines(entry: dict) -> str:
     """The report's section on the projections."""
     lines = ["## The feasible set, projected (`feasible_set.png`)", "",
              f"Pairs: {entry['selection']}; outer polygons from safe LP bounds, refined {entry['refine']} rounds "
-             f"({entry['lp_solves']} LPs, {entry['seconds']:.2f} s). Gap: the largest distance of the outer polygon "
+             f"({entry['lp_solves']} LP solves, {entry['seconds']:.2f} s). Gap: the largest distance of the outer polygon "
              "outside the inner one (the LP points), relative to the box.", "",
              "| pair | directions | vertices | polygon / box area | gap | coupling score | truth inside |",
              "|---|---:|---:|---:|---:|---:|---|"]
