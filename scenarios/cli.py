@@ -315,7 +315,8 @@ def identify(
                                 ("--coupled-wrist", coupled_wrist)):
                 if value is not None:
                     raise OptionError(f"{name} needs --urdf (the H4's settings are its spec's), got {name}")
-            result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing, pairs)
+            result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing,
+                                  pairs)
     except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))
     if as_json:

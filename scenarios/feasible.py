@@ -278,8 +278,8 @@ def polygon_history(run, pairs, history: dict, directions: int = 16, refine: int
     :func:`scenarios.replay.box_history` result (its k, and its hull boxes as the LPs' boxes; a k where the
     hull did not run is left out); directions, refine : :func:`ident.estimators.projection.project_pair`. The
     rows for k are those of the box history. Returns ``{"pairs", "indices", "lower", "width"`` (the final hull
-    box of each pair: the unit square of the replay's plane), ``"polygons"`` (per pair, per k: (V, 2) vertices or None where the
-    data of that k were not usable), ``"boxes"`` (per pair, per k: (lower (2,), upper (2,)) or None),
+    box of each pair: the unit square of the replay's plane), ``"polygons"`` (per pair, per k: (V, 2) vertices
+    or None where the data of that k were not usable), ``"boxes"`` (per pair, per k: (lower (2,), upper (2,)) or None),
     ``"time"``, ``"seconds"}``.
     """
     from ident.estimators.projection import project_pair

@@ -379,9 +379,9 @@ def _blueprint(rrb, names, units, history_methods, eye, target, pairs=()) -> obj
                                for n, u in zip(names, units)], grid_columns=4,
                              name=f"box history ({key}, true green)"))
     if pairs:
-        tabs.append(rrb.Grid(*[rrb.Spatial2DView(origin=f"feasible/{a}_{b}", name=f"{a} vs {b} (final hull = unit square)",
-                                                 visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, 1.6],
-                                                                                  y_range=[-0.6, 1.6]))
+        bounds = rrb.VisualBounds2D(x_range=[-0.6, 1.6], y_range=[-0.6, 1.6])
+        tabs.append(rrb.Grid(*[rrb.Spatial2DView(origin=f"feasible/{a}_{b}", visual_bounds=bounds,
+                                                 name=f"{a} vs {b} (final hull = unit square)")
                                for a, b in pairs], grid_columns=min(len(pairs), 3),
                              name="feasible set (hull blue, projection green, true green dot)"))
     scene = rrb.Spatial3DView(origin="/", contents=["/robot/**", "/reference/**"],

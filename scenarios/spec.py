@@ -127,7 +127,8 @@ def _check_lists(spec: dict) -> None:
     if not isinstance(fs["pairs"], list) or not all(isinstance(v, str) and v.count(":") == 1 for v in fs["pairs"]):
         raise ScenarioError(f"feasible.pairs must be a list of strings NAME:NAME, got {fs['pairs']!r}")
     for key, value, ok in (("feasible.count", fs["count"], fs["count"] >= 1),
-                           ("feasible.directions", fs["directions"], fs["directions"] >= 4 and fs["directions"] % 4 == 0),
+                           ("feasible.directions", fs["directions"],
+                            fs["directions"] >= 4 and fs["directions"] % 4 == 0),
                            ("feasible.refine", fs["refine"], fs["refine"] >= 0),
                            ("prediction.seed_offset", pr["seed_offset"], pr["seed_offset"] != 0),
                            ("prediction.rows", pr["rows"], pr["rows"] >= 1),

@@ -5,9 +5,11 @@ new regressor rows ``W_new``, the range of ``W_new,k theta`` over S is two linea
 ``min / max W_new,k theta  s.t.  theta in S``. Over the box Q alone the range is exact by interval evaluation
 but ignores the correlations of S, so it is much wider. Each LP (one HiGHS model on a working set of rows,
 :class:`ident.estimators.support.SupportLP`, warm-started from the previous optimum, rows scaled by their bound,
-columns to unit root-mean-square, violated rows added until none is left) only steers: the endpoint returned is the Neumaier-Shcherbina safe bound (Neumaier & Shcherbina, Math.
-Program. 99, 2004; :class:`ident.numerics.lp.SafeBound`) on the original data with the LP's row duals, rigorous
-for any duals; an LP that HiGHS does not solve keeps the box's bound. Each endpoint is also intersected with
+columns to unit root-mean-square, violated rows added until none is left) only steers: the endpoint returned
+is the Neumaier-Shcherbina safe bound (Neumaier & Shcherbina, Math. Program. 99, 2004;
+:class:`ident.numerics.lp.SafeBound`) of the working-set LP with its row duals, on the original data: rigorous
+for any duals, and a bound of the full LP too (fewer rows, a larger set); an LP that HiGHS does not solve keeps
+the box's bound. Each endpoint is also intersected with
 the interval evaluation over Q (both are outer bounds). Nothing here depends on the robot.
 """
 
@@ -67,8 +69,8 @@ def envelope_lp(W, y, bound, lower, upper, W_new, *, center=None, lp_tol: float 
     for k in reversed(todo):
         hi_out[k] = min(hi_out[k], engine.maximize(W_new[k])[0])
     lps = 2 * len(todo)
-    info = {"lps": lps, "lp_solves": engine.solves, "lp_failures": engine.failures, "working_rows": int(engine.idx.size),
-            "seconds": time.perf_counter() - t0}
+    info = {"lps": lps, "lp_solves": engine.solves, "lp_failures": engine.failures,
+            "working_rows": int(engine.idx.size), "seconds": time.perf_counter() - t0}
     return lo_out, hi_out, info
 
 

@@ -90,7 +90,8 @@ class Polygon:
     def to_json(self) -> dict:
         """``{"parameters", "vertices", "directions", "gap", "area", "inner_area"}`` (plain lists)."""
         return {"parameters": list(self.parameters), "vertices": self.vertices.tolist(), "directions": self.directions,
-                "gap": self.gap, "area": polygon_area(self.vertices), "inner_area": polygon_area(convex_hull(self.inner))}
+                "gap": self.gap, "area": polygon_area(self.vertices),
+                "inner_area": polygon_area(convex_hull(self.inner))}
 
 
 def _cross(a, b) -> float:
@@ -153,7 +154,8 @@ def project_pair(engine: SupportLP, i: int, j: int, *, directions: int = 32, ref
     p = engine.lower.size
     if not (0 <= i < p and 0 <= j < p) or i == j:
         raise ValueError(f"i and j must be two different parameter indices in [0, {p}), got {i} and {j}")
-    if isinstance(directions, bool) or not isinstance(directions, (int, np.integer)) or directions < 4 or directions % 4:
+    if isinstance(directions, bool) or not isinstance(directions, (int, np.integer)) or directions < 4 \
+            or directions % 4:
         raise ValueError(f"directions must be a multiple of 4 (>= 4), got {directions!r}")
     t0, solves0 = time.perf_counter(), engine.solves
     names = tuple(names) if names is not None else tuple(f"theta{k + 1}" for k in range(p))

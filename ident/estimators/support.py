@@ -68,14 +68,16 @@ class SupportLP:
         if not np.all(np.isfinite(b)) or np.any(b <= 0):
             raise ValueError("bound must be finite and > 0")
         lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-        if lower.shape != (p,) or upper.shape != (p,) or not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
+        if lower.shape != (p,) or upper.shape != (p,) or not (np.all(np.isfinite(lower))
+                                                              and np.all(np.isfinite(upper))):
             raise ValueError(f"lower and upper must be finite ({p},) arrays, got {lower.shape} and {upper.shape}")
         if np.any(lower > upper):
             raise ValueError("lower must be <= upper")
         self.W, self.b, self.lower, self.upper = W, np.ascontiguousarray(b), lower, upper
         self.bl, self.bu = strip_bounds(y, self.b)
-        if center is None:
-            center = np.linalg.lstsq(W * (1.0 / self.b)[:, None], y / self.b, rcond=None)[0] if n else 0.5 * (lower + upper)
+        if center is None:  # weighted least squares (rows scaled by their bound), or the box's midpoint
+            center = np.linalg.lstsq(W * (1.0 / self.b)[:, None], y / self.b, rcond=None)[0] if n \
+                else 0.5 * (lower + upper)
         c0 = np.asarray(center, dtype=float)
         self.center = np.clip(np.where(np.isfinite(c0), c0, 0.5 * (lower + upper)), lower, upper)
         self.m0 = (0.5 * self.bl + 0.5 * self.bu) - W @ self.center  # strip centres, shifted (float: steers only)

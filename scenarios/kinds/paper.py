@@ -61,7 +61,8 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
 def feasible_set(run_, out: Path) -> dict:
     """The projections of the run's feasible set, the methods' sets beside them, ``feasible_set.png``."""
     from ident.estimators import registry
-    from scenarios.feasible import drawn_methods, feasible_set as project, parse_pairs, plot_feasible_set, reference_sets
+    from scenarios.feasible import drawn_methods, parse_pairs, plot_feasible_set, reference_sets
+    from scenarios.feasible import feasible_set as project
 
     cfg, eq = run_.spec["feasible"], run_.equation
     names = list(eq.names)
@@ -172,8 +173,8 @@ def feasible_lines(entry: dict) -> str:
     """The report's section on the projections."""
     lines = ["## The feasible set, projected (`feasible_set.png`)", "",
              f"Pairs: {entry['selection']}; outer polygons from safe LP bounds, refined {entry['refine']} rounds "
-             f"({entry['lp_solves']} LP solves, {entry['seconds']:.2f} s). Gap: the largest distance of the outer polygon "
-             "outside the inner one (the LP points), relative to the box.", "",
+             f"({entry['lp_solves']} LP solves, {entry['seconds']:.2f} s). Gap: the largest distance of the outer "
+             "polygon outside the inner one (the LP points), relative to the box.", "",
              "| pair | directions | vertices | polygon / box area | gap | coupling score | truth inside |",
              "|---|---:|---:|---:|---:|---:|---|"]
     for pj in entry["pairs"]:

@@ -168,3 +168,19 @@ def test_coupling_scores_separate_coupled_from_independent_pairs():
     screened = P.coupling_scores(eng, candidates=2)
     assert P.most_coupled_pairs(screened, 1) == P.most_coupled_pairs(full, 1) == [(0, 1)]
     assert np.count_nonzero(np.triu(screened, 1)) <= 2
+
+
+def test_support_lp_on_a_working_set_equals_linprog_on_all_rows():
+    """3000 rows: the working set stays a fraction of them, the bounds are outer and tight against scipy."""
+    W, y, b, lo, hi, theta, rng = _problem(11, m=3000, p=6)
+    eng = SupportLP(W, y, b, lo, hi, initial_rows=50)
+    A, rhs = _inequalities(W, y, b, lo, hi)
+    for c in rng.standard_normal((6, 6)):
+        mu, x = eng.minimize(c)
+        ref = linprog(c, A_ub=A, b_ub=rhs, bounds=list(zip(lo, hi)), method="highs")
+        assert ref.status == 0
+        scale = np.abs(c) @ (hi - lo)
+        assert mu <= ref.fun + 1e-12 * scale  # a lower bound of the minimum over all rows
+        assert mu == pytest.approx(ref.fun, abs=1e-7 * scale)
+        assert mu <= c @ theta  # the truth is feasible
+    assert eng.idx.size < W.shape[0] // 2 and eng.failures == 0
