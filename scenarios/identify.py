@@ -458,7 +458,8 @@ def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: i
 
             box = ident.Box(np.array(result["methods"][method]["lower"]), np.array(result["methods"][method]["upper"]),
                             tuple(names)) if method in result["methods"] else None
+            units = ident.PARAMETER_UNITS if tuple(names) == tuple(ident.PARAMETER_NAMES) else None  # the H4's
             result["feasible_set"] = identify_projections(tmp, W, y, bound, prior, names, None if chosen == "auto"
-                                                          else chosen, box=box, method=method)
+                                                          else chosen, box=box, method=method, units=units)
         write_json(tmp / "result.json", result)
     return result
