@@ -284,6 +284,8 @@ def identify(
     model: Optional[Path] = typer.Option(None, help="MJCF model giving the robot's geometry"),
     out: Optional[Path] = typer.Option(None, help="output folder (default runs/identify-<file stem>)"),
     as_json: bool = typer.Option(False, "--json", help="print result.json (the only output on stdout)"),
+    pairs: Optional[str] = typer.Option(None, help="the feasible set's projections onto pairs, feasible_set.png: "
+                                        "auto (the most coupled) or NAME:NAME,... (e.g. Fv1:Fs1,Imot1:Mnac)"),
 ) -> None:
     """The estimators on a user's own data; prints the table (or result.json) and writes result.json.
 
@@ -305,7 +307,7 @@ def identify(
                 raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
                                   f"regressor at the sample instants), got --torque-timing {torque_timing}")
             result = _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist,
-                                    cutoff_hz, decimation, prior, model, out)
+                                    cutoff_hz, decimation, prior, model, out, pairs)
         else:
             for name, value in (("--mass", mass), ("--reach", reach), ("--cutoff-hz", cutoff_hz != "100" or None),
                                 ("--decimation", decimation != "100" or None), ("--no-friction", not friction or None),
@@ -313,7 +315,8 @@ def identify(
                                 ("--coupled-wrist", coupled_wrist)):
                 if value is not None:
                     raise OptionError(f"{name} needs --urdf (the H4's settings are its spec's), got {name}")
-            result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing)
+            result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing,
+                                  pairs)
     except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))
     if as_json:
@@ -337,7 +340,7 @@ def identify(
 
 
 def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
-                   decimation, prior, model, out) -> dict:
+                   decimation, prior, model, out, pairs=None) -> dict:
     from scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
 
     for name, value in (("--prior", prior), ("--model", model)):
@@ -375,10 +378,11 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         mass=None if mass is None else parse_number(mass, "--mass", positive=True),
         reach=None if reach is None else parse_number(reach, "--reach", positive=True),
         friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=wrist,
-        cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out)
+        cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out, pairs=pairs)
 
 
-def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold") -> dict:
+def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold",
+                 pairs=None) -> dict:
     from scenarios.identify import OptionError, identify_csv, load_prior, parse_bound, parse_number
 
     bounds = parse_bound(bound)
@@ -388,7 +392,8 @@ def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, ou
     box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
     if torque_timing not in ("hold", "sample"):
         raise OptionError(f"--torque-timing must be hold or sample, got {torque_timing!r}")
-    return identify_csv(file, bounds, method=method, prior=box, model=model, out=out, torque_timing=torque_timing)
+    return identify_csv(file, bounds, method=method, prior=box, model=model, out=out, torque_timing=torque_timing,
+                        pairs=pairs)
 
 
 @app.command()

@@ -211,17 +211,19 @@ def _check_processed_bound(rows_bound, bound) -> None:
 
 
 def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None, out=None,
-                 block_samples: int = BLOCK_SAMPLES, torque_timing: str = "hold") -> dict:
+                 block_samples: int = BLOCK_SAMPLES, torque_timing: str = "hold", pairs: str | None = None) -> dict:
     """Identify the 14 parameters from a CSV log and write ``result.json`` in ``out``.
 
     bound : raw-row bound [N m], one number or (4,) per joint; prior : (lower, upper) numbers, (14,) arrays
     each, or a Box; block_samples : processing block length (:func:`ident.processing.processing.build_equation`);
     torque_timing : "hold" (each logged torque is a command held over its step: the regressor at mid-step) or
-    "sample" (a torque measured at the sample instant), :func:`ident.processing.filtering.derivatives`.
+    "sample" (a torque measured at the sample instant), :func:`ident.processing.filtering.derivatives`;
+    pairs : ``--pairs`` (``auto`` or ``NAME:NAME,...``): the feasible set's projections, ``feasible_set.png``.
     Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
     (the method's status ``failed`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
     """
     check_method(method)
+    _pairs(pairs, ident.PARAMETER_NAMES)  # a bad --pairs fails before the log is read
     b = _joint_bounds(bound)
     box_prior = _prior_box(prior)
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
@@ -244,7 +246,8 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
         "prior": {"lower": box_prior.lower.tolist(), "upper": box_prior.upper.tolist()}, "methods": {},
     }
     result["min_consistent_bound"] = float(ident.min_consistent_bound(eq.W, eq.y, box_prior))
-    return _estimate_and_write(result, eq.W, eq.y, eq.bound, box_prior, method, N_JOINTS, eq.names, eq.joint, out)
+    return _estimate_and_write(result, eq.W, eq.y, eq.bound, box_prior, method, N_JOINTS, eq.names, eq.joint, out,
+                               pairs)
 
 
 # ------------------------------------------------------------------------------- any serial robot (URDF)
@@ -302,7 +305,7 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
                       offset: bool = True, coupled_wrist: tuple[int, int] | None = None,
                       rotor_inertia_max: float | None = None,
                       cutoff_hz: float = URDF_PROCESSING["cutoff_hz"],
-                      decimation: int = URDF_PROCESSING["decimation"], out=None) -> dict:
+                      decimation: int = URDF_PROCESSING["decimation"], out=None, pairs: str | None = None) -> dict:
     """Identify a serial robot's base parameters from a joint-side CSV log; write ``result.json`` in ``out``.
 
     urdf : the robot (:class:`ident.robots.serial.SerialRobot`, n actuated joints; friction, rotor_inertia, offset
@@ -385,7 +388,7 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
                             "singular_gap": base.singular_gap},
         "methods": {},
     }
-    return _estimate_and_write(result, eq.W, eq.y, rows_bound, prior, method, nj, base.names, eq.joint, out)
+    return _estimate_and_write(result, eq.W, eq.y, rows_bound, prior, method, nj, base.names, eq.joint, out, pairs)
 
 
 # the Chebyshev LP's upper bound exceeds the smallest consistent scale by at most its tolerance (about 1e-9
@@ -412,7 +415,20 @@ def wls_consistency(W, y, bound, prior, min_bound: float | None = None) -> dict:
             "method": "Chebyshev LP (ident.min_consistent_bound) on the rows scaled by their bound"}
 
 
-def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: int, names, joint_of_row, out) -> dict:
+def _pairs(pairs, names):
+    """``--pairs`` parsed (None: not asked; ``"auto"``: the most coupled), OptionError naming it."""
+    from scenarios.feasible import pairs_option
+
+    if pairs is None:
+        return None
+    try:
+        return pairs_option(pairs, names) or "auto"
+    except ValueError as exc:
+        raise OptionError(str(exc)) from None
+
+
+def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: int, names, joint_of_row, out,
+                        pairs: str | None = None) -> dict:
     """WLS or a box method on (W, y, bound) into ``result`` (a proven inconsistency is recorded, with
     ``consistent`` False), then ``result.json`` into the owned folder ``out``; returns ``result``."""
     if method == "wls":
@@ -436,5 +452,14 @@ def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: i
                                          "seconds": time.perf_counter() - t0}
             result["consistent"] = False
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
+        chosen = _pairs(pairs, names)
+        if chosen is not None and result.get("consistent") is not False:
+            from scenarios.feasible import identify_projections
+
+            box = ident.Box(np.array(result["methods"][method]["lower"]), np.array(result["methods"][method]["upper"]),
+                            tuple(names)) if method in result["methods"] else None
+            units = ident.PARAMETER_UNITS if tuple(names) == tuple(ident.PARAMETER_NAMES) else None  # the H4's
+            result["feasible_set"] = identify_projections(tmp, W, y, bound, prior, names, None if chosen == "auto"
+                                                          else chosen, box=box, method=method, units=units)
         write_json(tmp / "result.json", result)
     return result

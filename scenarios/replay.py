@@ -14,6 +14,10 @@ What the recording holds (one timeline, ``sim_time``: a duration in seconds, the
   ``y - W theta_true`` of the processed rows against ``+- bound`` at ``dataset.t[equation.sample]``;
 * ``estimate/<parameter>/<method>/lower|upper`` and ``estimate/<parameter>/true``: the box history of
   :func:`box_history` (the box from the first k seconds of data, at ``sim_time = t0 + k``);
+* ``feasible/<A>_<B>/polygon|hull|true``: for a run with projections (``run.feasible``, the paper kind), each
+  pair's outer polygon of the feasible set from the first k seconds of data (the same k as the box history,
+  :func:`scenarios.feasible.polygon_history`), the hull box of those data and the truth, in the plane scaled so
+  that the final hull box is the unit square: the polygons shrink as data arrive;
 * ``summary``: a markdown table (truth, final boxes, enclosure);
 * a blueprint: the 3D view and the summary on the left, tabs of time-series grids (one view per joint or
   parameter) on the right.
@@ -143,6 +147,30 @@ def box_history(run, methods=("hull", "cgsp"), points: int = 10, estimator=None,
                 progress("replay history", done, total)
         out["methods"][method] = res
     return out
+
+
+def _log_polygons(rec, rr, run, ph: dict) -> None:
+    for n, (a, b) in enumerate(ph["pairs"]):
+        base = f"feasible/{a}_{b}"
+        lo, w = ph["lower"][n], ph["width"][n]
+        i, j = ph["indices"][n]
+        truth = (np.asarray(run.theta_true)[[i, j]] - lo) / w
+        rec.log(f"{base}/true", rr.Points2D([truth], colors=[_TRUE], radii=[0.02], labels=["truth"]), static=True)
+        times, strips, rects = [], [], []
+        for k, tk in enumerate(ph["time"]):
+            v, box = ph["polygons"][n][k], ph["boxes"][n][k]
+            if v is None or box is None:
+                continue
+            times.append(float(tk))
+            strips.append((np.vstack([v, v[:1]]) - lo) / w)
+            bl, bu = (box[0] - lo) / w, (box[1] - lo) / w
+            rects.append(np.array([[bl[0], bl[1]], [bu[0], bl[1]], [bu[0], bu[1]], [bl[0], bu[1]], [bl[0], bl[1]]]))
+        if not times:
+            continue
+        for name, data, color, radius in (("polygon", strips, _GREEN, 0.006), ("hull", rects, _BLUE, 0.004)):
+            rec.log(f"{base}/{name}", rr.LineStrips2D.from_fields(colors=[color], radii=[radius]), static=True)
+            rec.send_columns(f"{base}/{name}", indexes=_time(rr, times),
+                             columns=rr.LineStrips2D.columns(strips=data).partition(lengths=[1] * len(times)))
 
 
 # ------------------------------------------------------------------------------------------------- geometry
@@ -337,7 +365,7 @@ def _summary(run, history: dict | None) -> str:
     return "\n".join(lines)
 
 
-def _blueprint(rrb, names, units, history_methods, eye, target) -> object:
+def _blueprint(rrb, names, units, history_methods, eye, target, pairs=()) -> object:
     def joint_grid(quantity, title):
         return rrb.Grid(*[rrb.TimeSeriesView(origin=f"series/{quantity}/joint{i}", name=f"{title} joint {i}")
                           for i in range(1, 5)], grid_columns=2, name=f"{title} [{_UNITS[quantity]}]")
@@ -350,6 +378,12 @@ def _blueprint(rrb, names, units, history_methods, eye, target) -> object:
                                                   plot_legend=rrb.PlotLegend(visible=False))
                                for n, u in zip(names, units)], grid_columns=4,
                              name=f"box history ({key}, true green)"))
+    if pairs:
+        bounds = rrb.VisualBounds2D(x_range=[-0.6, 1.6], y_range=[-0.6, 1.6])
+        tabs.append(rrb.Grid(*[rrb.Spatial2DView(origin=f"feasible/{a}_{b}", visual_bounds=bounds,
+                                                 name=f"{a} vs {b} (final hull = unit square)")
+                               for a, b in pairs], grid_columns=min(len(pairs), 3),
+                             name="feasible set (hull blue, projection green, true green dot)"))
     scene = rrb.Spatial3DView(origin="/", contents=["/robot/**", "/reference/**"],
                               name="H4 (exact states) and reference ghost",
                               eye_controls=rrb.EyeControls3D(position=eye, look_target=target, eye_up=[0, 0, 1]))
@@ -395,8 +429,15 @@ def write_replay(run, path, history_points: int = 10, progress=None, *, history:
     progress("replay", 1, steps)
     _log_signals(rec, rr, run)
     progress("replay", 2, steps)
+    pairs = []
     if history is not None:
         _log_history(rec, rr, history)
+        feasible = getattr(run, "feasible", None)
+        if feasible and feasible.get("pairs") and "hull" in history["methods"]:
+            pairs = [tuple(pj["parameters"]) for pj in feasible["pairs"]]
+            from scenarios.feasible import polygon_history
+
+            _log_polygons(rec, rr, run, polygon_history(run, pairs, history))
     rec.log("summary", rr.TextDocument(_summary(run, history), media_type=rr.MediaType.MARKDOWN), static=True)
     names = list(run.equation.names)
     import ident
@@ -407,7 +448,7 @@ def write_replay(run, path, history_points: int = 10, progress=None, *, history:
     target = 0.5 * (g.motor_pos.mean(axis=0) + np.asarray(g.x_home[:3]))
     reach = float(np.linalg.norm(g.motor_pos[:, :2], axis=1).max() + g.arm_length.max())
     eye = target + reach * np.array([1.5, -1.8, 0.35])  # three-quarter view from the side of chains 2-3
-    rec.send_blueprint(_blueprint(rrb, names, units, hist_methods, eye.tolist(), target.tolist()))
+    rec.send_blueprint(_blueprint(rrb, names, units, hist_methods, eye.tolist(), target.tolist(), pairs))
     progress("replay", 3, steps)
     data = stream.read(flush=True)
     if not data:

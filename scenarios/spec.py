@@ -54,6 +54,13 @@ DEFAULTS: dict = {
     "uncertain": {"calibration_seed_offset": 1000, "calibration_spread": 0.3, "safety": 2.0, "sign_band": 0.005,
                   "second_order_margin": 0.1},
     "replay": {"enabled": True, "history_points": 10},
+    # the feasible set's projections (scenarios.feasible; kind paper): pairs "NAME:NAME" (empty: the `count` most
+    # coupled), K directions (a multiple of 4), refinement rounds towards the exact projection, methods drawn
+    # beside it (empty: the spec's methods plus ellipsoid, zonotope and wls when registered)
+    "feasible": {"enabled": True, "pairs": [], "count": 3, "directions": 32, "refine": 3, "methods": []},
+    # guaranteed prediction on a held-out motion (kind paper): a second designed trajectory and its simulation
+    # with seed + seed_offset, processed the same way; the polytope envelope on `rows` evenly spaced rows
+    "prediction": {"enabled": True, "seed_offset": 100, "rows": 240, "joint": 1},
     "quick": {},
 }
 
@@ -115,6 +122,20 @@ def _check_lists(spec: dict) -> None:
     n_traj = spec["campaign"]["trajectories"]
     if isinstance(n_traj, bool) or not isinstance(n_traj, int) or n_traj < 0:
         raise ScenarioError(f"campaign.trajectories must be an integer >= 0, got {n_traj!r}")
+    fs, pr = spec["feasible"], spec["prediction"]
+    _check_methods(fs["methods"], "feasible.methods")
+    if not isinstance(fs["pairs"], list) or not all(isinstance(v, str) and v.count(":") == 1 for v in fs["pairs"]):
+        raise ScenarioError(f"feasible.pairs must be a list of strings NAME:NAME, got {fs['pairs']!r}")
+    for key, value, ok in (("feasible.count", fs["count"], fs["count"] >= 1),
+                           ("feasible.directions", fs["directions"],
+                            fs["directions"] >= 4 and fs["directions"] % 4 == 0),
+                           ("feasible.refine", fs["refine"], fs["refine"] >= 0),
+                           ("prediction.seed_offset", pr["seed_offset"], pr["seed_offset"] != 0),
+                           ("prediction.rows", pr["rows"], pr["rows"] >= 1),
+                           ("prediction.joint", pr["joint"], 1 <= pr["joint"] <= 4)):
+        if isinstance(value, bool) or not ok:
+            raise ScenarioError(f"{key} has a bad value {value!r} (count >= 1, directions a multiple of 4, refine "
+                                ">= 0, seed_offset != 0, rows >= 1, joint in 1..4)")
     factors = spec["sweep"]["factors"]
     if not isinstance(factors, list) or not factors or not all(
             isinstance(f, (int, float)) and not isinstance(f, bool) and f > 0 for f in factors):

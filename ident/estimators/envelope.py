@@ -3,11 +3,13 @@
 For the feasible set ``S = {theta in Q : |y - W theta| <= b}`` (Q a finite box, the prior or a hull of S) and
 new regressor rows ``W_new``, the range of ``W_new,k theta`` over S is two linear programs per row,
 ``min / max W_new,k theta  s.t.  theta in S``. Over the box Q alone the range is exact by interval evaluation
-but ignores the correlations of S, so it is much wider. Each LP (one HiGHS model, :class:`ident.numerics.lp.
-LPModel`, warm-started from the previous optimum, rows scaled by their bound, columns to unit root-mean-square)
-only steers: the endpoint returned is the Neumaier-Shcherbina safe bound (Neumaier & Shcherbina, Math.
-Program. 99, 2004; :class:`ident.numerics.lp.SafeBound`) on the original data with the LP's row duals, rigorous
-for any duals; an LP that HiGHS does not solve keeps the box's bound. Each endpoint is also intersected with
+but ignores the correlations of S, so it is much wider. Each LP (one HiGHS model on a working set of rows,
+:class:`ident.estimators.support.SupportLP`, warm-started from the previous optimum, rows scaled by their bound,
+columns to unit root-mean-square, violated rows added until none is left) only steers: the endpoint returned
+is the Neumaier-Shcherbina safe bound (Neumaier & Shcherbina, Math. Program. 99, 2004;
+:class:`ident.numerics.lp.SafeBound`) of the working-set LP with its row duals, on the original data: rigorous
+for any duals, and a bound of the full LP too (fewer rows, a larger set); an LP that HiGHS does not solve keeps
+the box's bound. Each endpoint is also intersected with
 the interval evaluation over Q (both are outer bounds). Nothing here depends on the robot.
 """
 
@@ -17,9 +19,8 @@ import time
 
 import numpy as np
 
-from ident.estimators.hull import strip_bounds
+from ident.estimators.support import SupportLP
 from ident.numerics.interval import point_matvec
-from ident.numerics.lp import LPError, LPModel, power2_scale, safe_lower_bound
 
 __all__ = ["envelope_lp", "prediction_envelope"]
 
@@ -45,7 +46,8 @@ def envelope_lp(W, y, bound, lower, upper, W_new, *, center=None, lp_tol: float 
 
     W : (m, p); y : (m,) (units of y); bound : scalar or (m,) > 0 (units of y); lower, upper : (p,) finite box
     containing S; W_new : (k, p); center : (p,) a point near S (the LPs' origin; default least squares).
-    Returns ``(lo (k,), hi (k,), info)`` (units of y) with info ``{'lp_solves', 'lp_failures', 'seconds'}``.
+    Returns ``(lo (k,), hi (k,), info)`` (units of y) with info ``{'lps'`` (two per non-zero row),
+    ``'lp_solves'`` (HiGHS runs, re-solves of the working set included), ``'lp_failures', 'working_rows', 'seconds'}``.
     Raises ValueError on shapes that do not agree or a bound that is not finite and positive.
     """
     t0 = time.perf_counter()
@@ -58,36 +60,17 @@ def envelope_lp(W, y, bound, lower, upper, W_new, *, center=None, lp_tol: float 
     b = np.broadcast_to(np.asarray(bound, dtype=float), (m,))
     if not np.all(np.isfinite(b)) or np.any(b <= 0):
         raise ValueError("bound must be finite and > 0")
-    bl, bu = strip_bounds(y, b)
     box_lo, box_hi = point_matvec(W_new, lower, upper)
     lo_out, hi_out = np.array(box_lo, dtype=float), np.array(box_hi, dtype=float)
-    x0 = np.linalg.lstsq(W, y, rcond=None)[0] if center is None else np.asarray(center, dtype=float)
-    x0 = np.clip(x0, lower, upper)
-    r = power2_scale(b)
-    d = power2_scale(np.sqrt(np.mean((W * r[:, None]) ** 2, axis=0)) + 1e-300)
-    model = LPModel(lower, upper, center=x0, col_scale=d, tolerance=lp_tol)
-    m0 = W @ x0
-    model.add_shifted_rows(W, bl - m0, bu - m0, b)
-    failures = 0
-    for k in range(W_new.shape[0]):
-        for sign in (1.0, -1.0):
-            c = sign * W_new[k]
-            if not np.any(c * d):
-                continue
-            try:
-                sol = model.solve(c)
-            except LPError:
-                failures += 1
-                continue
-            if sol.status != "optimal" or not sol.dual_valid:
-                failures += 1
-                continue
-            mu = safe_lower_bound(W, bl, bu, lower, upper, c, sol.duals)
-            if sign > 0:
-                lo_out[k] = max(lo_out[k], mu)
-            else:
-                hi_out[k] = min(hi_out[k], -mu)
-    info = {"lp_solves": model.solves, "lp_failures": failures, "seconds": time.perf_counter() - t0}
+    engine = SupportLP(W, y, b, lower, upper, center=center, lp_tol=lp_tol)
+    todo = [k for k in range(W_new.shape[0]) if np.any(W_new[k])]  # a zero row's range is {0}: the box's
+    for k in todo:  # all minima in the rows' order, then all maxima in reverse: consecutive optima are close
+        lo_out[k] = max(lo_out[k], engine.minimize(W_new[k])[0])
+    for k in reversed(todo):
+        hi_out[k] = min(hi_out[k], engine.maximize(W_new[k])[0])
+    lps = 2 * len(todo)
+    info = {"lps": lps, "lp_solves": engine.solves, "lp_failures": engine.failures,
+            "working_rows": int(engine.idx.size), "seconds": time.perf_counter() - t0}
     return lo_out, hi_out, info
 
 

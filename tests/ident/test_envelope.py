@@ -51,7 +51,8 @@ def test_envelope_all_rows_and_info():
     W, y, b, lo, hi, _, rng = _problem(5)
     W_new = np.vstack([rng.standard_normal((4, W.shape[1])), np.zeros((1, W.shape[1]))])
     lo_e, hi_e, info = envelope_lp(W, y, b, lo, hi, W_new)
-    assert info["lp_solves"] == 8 and info["lp_failures"] == 0  # the zero row needs no LP: its range is {0}
+    assert info["lps"] == 8 and info["lp_solves"] >= 8  # the zero row needs no LP: its range is {0}
+    assert info["lp_failures"] == 0
     assert lo_e[-1] <= 0.0 <= hi_e[-1] and hi_e[-1] - lo_e[-1] < 1e-290  # {0}, rounded outward
     lower, upper = prediction_envelope(W, y, b, (lo, hi), W_new)
     assert np.array_equal(lower, lo_e) and np.array_equal(upper, hi_e)
