@@ -93,8 +93,14 @@ def _sweep_plot(plt, result: dict, out: Path) -> None:
 
 
 def plots(result: dict, art: dict, out: Path) -> None:
-    """Write ``boxes.png`` (if a box exists), ``envelope.png`` (if an envelope exists) and ``sweep.png`` into
-    ``out``. result : the study's result dict; art : its arrays (``wls_theta``, ``eq_ho``, ``envelope``, ``dt``)."""
+    """Write ``boxes.png`` (if a box exists), ``envelope.png`` (if an envelope exists) and ``sweep.png``.
+
+    Parameters
+    ----------
+    result : the study's result dict (:func:`scenarios.kinds.tx40.run_tx40`)
+    art : its arrays (``wls_theta``, ``eq_ho``, ``envelope``, ``dt``)
+    out : the folder (a ``pathlib.Path``)
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -208,7 +214,16 @@ def _relaxed_section(result: dict) -> list[str]:
 
 
 def report_text(result: dict) -> str:
-    """report.md of a tx40 run (from its result dict alone)."""
+    """The text of ``report.md`` of a tx40 run.
+
+    Parameters
+    ----------
+    result : the run's result dict (the schema in ``docs/results.md``)
+
+    Returns
+    -------
+    str, markdown ending with a newline.
+    """
     lines = _torque_section(result) + _hull_section(result) + _relaxed_section(result)
     lines += ["", "## Runtime [s]", "", ", ".join(f"{k} {v:.3g}" for k, v in result["seconds"].items()), "",
               ("Plots: `boxes.png` (boxes normalised to the widest, WLS marked), `envelope.png` (held-out torques "

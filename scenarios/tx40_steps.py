@@ -34,17 +34,37 @@ class Study(SimpleNamespace):
 
 
 def select_columns(eq, cols):
-    """The equation restricted to some columns (the rounding term, computed for all columns, stays: outer)."""
+    """The equation restricted to some columns (the rounding term, computed for all columns, stays: outer).
+
+    Parameters
+    ----------
+    eq : the processed equation (:func:`ident.robots.serial.process`)
+    cols : (c,) column indices
+
+    Returns
+    -------
+    The equation with ``W`` (N, c) and the names of those columns; everything else unchanged.
+    """
     return dataclasses.replace(eq, W=eq.W[:, cols], names=tuple(eq.names[c] for c in cols), info=dict(eq.info))
 
 
 def per_joint(x, joint, fn, nj: int = N_JOINTS) -> list[float]:
-    """``fn`` of the entries of ``x`` (N,) per joint (``joint`` (N,) 0-based); NaN for a joint with no entry."""
+    """``fn`` of the entries of ``x`` per joint.
+
+    Parameters
+    ----------
+    x : (N,) values; joint : (N,) their joints, 0-based; fn : callable on a 1-D array -> number;
+    nj : number of joints
+
+    Returns
+    -------
+    (nj,) list of floats, NaN for a joint with no entry.
+    """
     return [float(fn(x[joint == j])) if np.any(joint == j) else float("nan") for j in range(nj)]
 
 
 def rms(x):
-    """Root mean square of ``x`` (same units as x)."""
+    """Root mean square of ``x`` (array-like; the result in x's units)."""
     return np.sqrt(np.mean(np.square(x)))
 
 
@@ -53,8 +73,16 @@ def spectrum(raw: dict, theta: np.ndarray, r: int, dt: float, band, pass_hz: flo
     ``band`` [Hz]), the in-band (below ``pass_hz``) mean PSD and their ratio, and the white-noise RMS the
     parallel filter lets into a processed row, ``sqrt(S fs/2) ||h||_2`` [N m].
 
-    raw : ``{"W": (n, 6, c), "y": (n, 6)}`` the unfiltered regressor and torques; theta : (r,) parameters of the
-    first r columns; dt : sample step [s]; taps : the parallel filter's FIR taps.
+    Parameters
+    ----------
+    raw : ``{"W": (n, 6, c), "y": (n, 6)}`` the unfiltered regressor and torques [N m]
+    theta : (r,) parameters of the first r columns; r : int
+    dt : sample step [s]; band : (2,) [Hz]; pass_hz : [Hz]; taps : (L,) the parallel filter's FIR taps
+
+    Returns
+    -------
+    dict of ``freq`` (F,) [Hz], ``psd`` (F, 6) [N^2 m^2 / Hz] and per joint (6,): ``floor``, ``inband``, ``ratio``,
+    ``white_rms_processed`` [N m], ``raw_rms`` [N m].
     """
     import scipy.signal
 
@@ -72,7 +100,17 @@ def spectrum(raw: dict, theta: np.ndarray, r: int, dt: float, band, pass_hz: flo
 def load(cfg: dict, seed: int) -> Study:
     """The log (its first ``samples``, 0: all), the robot and its base parameters (QR on ``base_samples`` random
     states drawn from ``seed``), the base-parameter prior ``blo, bhi`` (the standard prior mapped exactly) and
-    the richer friction law's prior ``flo, fhi``; ``t_abs`` bounds |theta| of every column (for the rounding)."""
+    the richer friction law's prior ``flo, fhi``; ``t_abs`` bounds |theta| of every column (for the rounding).
+
+    Parameters
+    ----------
+    cfg : the ``[tx40]`` spec section; seed : int
+
+    Returns
+    -------
+    A new :class:`Study` with ``log``, ``n``, ``q``, ``tau``, ``robot``, ``base``, ``r``, ``blo``, ``bhi``,
+    ``flo``, ``fhi``, ``t_abs`` and ``seconds["base_parameters"]``.
+    """
     from ident.robots import tx40
 
     s = Study(cfg=cfg, seed=seed, seconds={})
@@ -94,7 +132,12 @@ def load(cfg: dict, seed: int) -> Study:
 def process_log(s: Study) -> None:
     """The first ``identify_fraction`` of the log identifies (``eq``, ``eq_rich`` with the richer friction
     columns, ``raw``: its unfiltered rows), the rest validates (``eq_ho``, ``eq_ho_rich``; processed separately,
-    no sample shared); sets ``n1`` (identification samples), ``prior`` (a Box), ``gain`` (||h||_1), ``taps``."""
+    no sample shared); sets ``n1`` (identification samples), ``prior`` (a Box), ``gain`` (||h||_1), ``taps``.
+
+    Parameters
+    ----------
+    s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
+    """
     import ident
     from ident.processing.filtering import decimation_fir
     from ident.robots.serial import process
@@ -117,7 +160,12 @@ def process_log(s: Study) -> None:
 
 
 def fit_wls(s: Study) -> None:
-    """Gautier's per-joint WLS (``w``: :class:`ident.WLSResult`) and its residuals ``res_id``, ``res_ho`` [N m]."""
+    """Gautier's per-joint WLS (``w``: :class:`ident.WLSResult`) and its residuals ``res_id``, ``res_ho`` [N m].
+
+    Parameters
+    ----------
+    s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
+    """
     import ident
 
     t0 = time.perf_counter()
@@ -131,7 +179,12 @@ def consistent_bounds(s: Study) -> None:
     """Minimum consistent bounds: ``t_all`` (all rows), ``t_j`` (6,) (each joint alone), ``scale`` and the
     joint-shaped processed-row bound ``b_joint = scale t_j`` (the smallest common scale that makes all rows
     consistent); the same with the richer friction law (``t_all_rich``, ``t_j_rich``, ``w_rich``,
-    ``res_ho_rich``); ``pass_hz`` and the residual spectrum ``spec`` (:func:`spectrum`)."""
+    ``res_ho_rich``); ``pass_hz`` and the residual spectrum ``spec`` (:func:`spectrum`).
+
+    Parameters
+    ----------
+    s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
+    """
     import ident
     from ident.estimators.hull import chebyshev
 
@@ -185,7 +238,12 @@ def _box_entry(s: Study, k: float, box, t0: float) -> tuple[dict, tuple]:
 def hull_boxes(s: Study) -> None:
     """Hull boxes (:func:`ident.estimate`) at each of ``factors`` x the joint-shaped bound: ``methods`` (name ->
     result entry; ``hull_<k>x``), ``boxes`` (name -> (k, Box)) and ``envelope`` (the arrays of the box at
-    ``envelope_factor``, else of the first consistent one; None if none)."""
+    ``envelope_factor``, else of the first consistent one; None if none).
+
+    Parameters
+    ----------
+    s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
+    """
     import ident
 
     s.methods, s.boxes, s.envelope = {}, {}, None
@@ -209,7 +267,12 @@ def polytope_envelope(s: Study) -> None:
     """The envelope over the feasible polytope itself (safe LP bounds, :func:`ident.robots.serial.
     prediction_envelope`) on every ``envelope_stride``-th held-out row per joint, for the box of ``envelope``:
     adds ``rows``, ``poly_lower``, ``poly_upper`` to ``envelope`` and ``heldout_polytope_envelope`` to its
-    method's entry. Nothing without a consistent box."""
+    method's entry. Nothing without a consistent box.
+
+    Parameters
+    ----------
+    s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
+    """
     from ident.robots.serial import prediction_envelope
 
     if s.envelope is None:
@@ -241,7 +304,12 @@ def polytope_envelope(s: Study) -> None:
 
 def relaxed(s: Study) -> None:
     """The q-relaxed hull (:func:`ident.relaxed_hull`) at ``outlier_factor`` (< 1) x the bound: ``relaxed`` (the
-    result entry: the box, the rows proven outliers whatever theta in it, the suspected rows)."""
+    result entry: the box, the rows proven outliers whatever theta in it, the suspected rows).
+
+    Parameters
+    ----------
+    s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
+    """
     import ident
     from ident.estimators.outliers import OutlierBudgetError
 
@@ -295,8 +363,17 @@ def _friction_vs_noise(s: Study) -> dict:
 
 
 def result_dict(s: Study, seconds_total: dict) -> dict:
-    """The JSON-ready result of the study (the schema is in ``docs/results.md``); ``seconds_total``: the
-    ``total`` and ``cpu_total`` times to add to the stages' times."""
+    """The JSON-ready result of the study (the schema is in ``docs/results.md``).
+
+    Parameters
+    ----------
+    s : the study after every stage
+    seconds_total : ``{"total": ..., "cpu_total": ...}`` [s], added to the stages' times
+
+    Returns
+    -------
+    dict of plain Python values (:func:`jsonable`).
+    """
     eq, b_joint = s.eq, s.b_joint
     result = {
         "scenario": "tx40", "seed": int(s.seed), "robot": "Staubli TX40 (real log, data/tx40)",
