@@ -28,7 +28,7 @@ def documented(section_title: str) -> dict[str, str]:
     for line in section[0].splitlines():
         m = _ROW.match(line)
         if m:
-            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            cells = [c.strip() for c in re.split(r"(?<!\\)\|", line.strip().strip("|"))]  # a pipe in a cell is \|
             rows[m.group(1)] = cells[1]
     return rows
 
