@@ -346,8 +346,9 @@ def throughput_lines(info: dict) -> list[str]:
 
 
 def summarise(spec: dict, seed: int, runs: list[dict], info: dict) -> dict:
-    """A campaign's result: the DESIGN keys over all runs (worst min consistent bound and oracle residual), how
-    many runs the bound covered, the per-method summary and the engine's ``info``."""
+    """A campaign's result: the common keys of every result (docs/results.md) over all runs (worst min consistent
+    bound and oracle residual), how many runs the bound covered, the per-method summary and the engine's
+    ``info``."""
     first = runs[0]
     return {
         "scenario": spec["name"], "kind": spec["kind"], "seed": seed, "quick": spec.get("quick_applied", False),

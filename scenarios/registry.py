@@ -2,7 +2,8 @@
 
 A kind module defines ``DESCRIPTION`` (one line) and ``run(spec, seed, out, progress) -> dict``, which writes the
 kind's files into ``out`` (a temporary folder the runner swaps into place when the run succeeds) and returns the
-result (the DESIGN schema: ``scenario``, ``parameters``, ``true``, ``bound``, ``methods.<name>`` ...).
+result (the common keys of ``docs/results.md``: ``scenario``, ``parameters``, ``true``, ``bound``,
+``methods.<name>`` ...); ``docs/scenarios.md`` says how to add a kind.
 A kind that fills its folder itself, resumably (a campaign), sets ``RESUMABLE = True``; its ``run`` then gets
 the final folder and the runner's options (``only``, ``fresh``). A kind may declare ``SPEC_DEFAULTS``, a table of
 spec sections of its own merged over :data:`scenarios.spec.DEFAULTS`.

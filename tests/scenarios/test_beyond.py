@@ -1,5 +1,6 @@
-"""The scenarios beyond the paper at their CI size (--quick): the DESIGN result schema, the plain method failing
-as designed, the robust method enclosing the truth, their own checks against the truth, and the files."""
+"""The scenarios beyond the paper at their CI size (--quick): the common result keys (docs/results.md), the plain
+method failing as designed, the robust method enclosing the truth, their own checks against the truth, and the
+files."""
 
 from __future__ import annotations
 

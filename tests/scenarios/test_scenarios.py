@@ -1,4 +1,4 @@
-"""Each scenario at its CI size (--quick): the result schema of DESIGN.md, the guarantee, the files, and
+"""Each scenario at its CI size (--quick): the result schema of docs/results.md, the guarantee, the files, and
 clear errors on bad input with no partial result left looking complete."""
 
 from __future__ import annotations
