@@ -303,6 +303,29 @@ class LPModel:
         check(self.highs.changeColsCost(self.n, self._cols, cd / norm), "changeColsCost")
         self._norm = norm
 
+    def _run(self):
+        """One ``run`` of HiGHS: (model status, simplex iterations); LPError if ``run`` itself fails."""
+        run_status = self.highs.run()
+        self.solves += 1
+        check(run_status, "run")
+        it = int(self.highs.getInfo().simplex_iteration_count)
+        self.iterations += it
+        return self.highs.getModelStatus(), it
+
+    def _retry(self, it: int):
+        """The LP once more from a cold start with HiGHS's default simplex (the model and its rows are kept; the
+        strategy is restored afterwards). Returns (model status, iterations of both runs)."""
+        h = self.highs
+        strategy = h.getOptionValue("simplex_strategy")
+        strategy = strategy[1] if isinstance(strategy, tuple) else strategy  # (status, value) in some highspy
+        h.clearSolver()
+        check(h.setOptionValue("simplex_strategy", 1), "option simplex_strategy=1")
+        try:
+            ms, it2 = self._run()
+        finally:
+            check(h.setOptionValue("simplex_strategy", strategy), f"option simplex_strategy={strategy!r}")
+        return ms, it + it2
+
     def solve(self, cost=None) -> LPSolution:
         """Solve ``min cost^T x`` warm-started from the previous basis; :class:`LPError` unless HiGHS finds the
         LP optimal or infeasible (any other model status, an error of ``run``, a solution without values).
@@ -317,12 +340,9 @@ class LPModel:
         elif self._norm is None:
             raise LPError("no cost set: pass one to the first solve")
         norm = self._norm
-        run_status = h.run()
-        self.solves += 1
-        check(run_status, "run")
-        it = int(h.getInfo().simplex_iteration_count)
-        self.iterations += it
-        ms = h.getModelStatus()
+        ms, it = self._run()
+        if ms not in (_OPTIMAL, _INFEASIBLE):  # e.g. "Unknown" from a warm start on a degenerate basis:
+            ms, it = self._retry(it)  # once more from a cold start with HiGHS's default (dual) simplex
         if ms == _INFEASIBLE:
             return LPSolution("infeasible", iterations=it)
         sol = h.getSolution()

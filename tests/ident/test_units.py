@@ -106,6 +106,20 @@ def test_the_hull_does_not_depend_on_the_units_of_each_row(seed, rel, exponents)
     assert_same_box(box0, box1.lower, box1.upper)
 
 
+def test_a_row_in_other_units_whose_warm_start_hull_lp_ends_unknown():
+    """Found by the property test above (seed 26909, rel 0.1, row 5 in 10^1 and row 6 in 10^8 units): HiGHS's
+    warm-started primal simplex ended one hull LP with model status "Unknown", so that endpoint fell back to the
+    prior; the LP core now retries such an LP once from a cold start with the dual simplex."""
+    W, y, b, lo, hi, _ = problem(26909, 0.1)
+    f = np.ones(W.shape[0])
+    f[5], f[6] = 10.0, 1e8
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no fallback
+        box0 = ident.estimate(W, y, b, (lo, hi))
+        box1 = ident.estimate(W * f[:, None], y * f, b * f, (lo, hi))
+    assert_same_box(box0, box1.lower, box1.upper)
+
+
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 10**6), short=st.sampled_from([1e-13, 1e-12, 1e-9, 1e-3, 0.3]), scale=units,
        method=st.sampled_from(["hull", "cgsp"]), rel=st.sampled_from([1e-3, 1e-12, 1e-13]))
