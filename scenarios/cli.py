@@ -164,11 +164,17 @@ def _print_summary(result: dict) -> None:
         if result.get(key) is not None:
             console.print(f"{key}: {_num(result[key])} N m")
     for name, m in result.get("methods", {}).items():
-        if m.get("status") != "ok":
-            console.print(f"[red]{name}: {m.get('message')}[/red]")
+        if m.get("status") != "ok" and "runs" not in m:
+            console.print(f"{name}: {m['status']}: {m.get('message')}", style="red", markup=False)
         elif "misses" in m:
+            cov = "" if m.get("coverage") is None else (
+                f"; coverage {m['coverage']:.3g} [{m['coverage_ci'][0]:.3g}, {m['coverage_ci'][1]:.3g}]")
             console.print(f"{name}: {m['misses']} miss(es) in {result['runs']} runs; with the bound covering the "
-                          f"residual: {len(m['misses_with_bound_covering_residual'])}")
+                          f"residual: {len(m['misses_with_bound_covering_residual'])}; unsound runs "
+                          f"{m.get('unsound_runs')}; failed runs {len(m.get('failed_runs', []))}{cov}", markup=False)
+        elif m.get("unsound"):
+            console.print(f"{name}: UNSOUND: narrower than the exact hull in {', '.join(m['narrower_than_hull'])}",
+                          style="red", markup=False)
 
 
 class _Progress:
@@ -212,6 +218,9 @@ def run(
     workers: Optional[int] = typer.Option(None, help="local worker processes for campaigns"),
     only: Optional[int] = typer.Option(None, help="campaigns: re-run this run index alone, with its replay"),
     fresh: bool = typer.Option(False, "--fresh", help="campaigns: recompute every run instead of resuming"),
+    methods: Optional[str] = typer.Option(None, help="estimators a,b,c (names, package.module:attribute, or all: "
+                                          "every registered one; h4bench estimators lists them), replacing the "
+                                          "spec's [estimators] methods"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
     from scenarios.campaign import CampaignInterrupted
@@ -220,7 +229,8 @@ def run(
     try:
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
-                                  scheduler=scheduler, workers=workers, only=only, fresh=fresh)
+                                  scheduler=scheduler, workers=workers, only=only, fresh=fresh,
+                                  methods=methods)
     except CampaignInterrupted as exc:
         typer.secho(f"stopped: {exc}", fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130)
@@ -242,6 +252,23 @@ def _json_text(result: dict) -> str:
     from scenarios.rundir import finite_json
 
     return finite_json(result)
+
+
+@app.command()
+def estimators(as_json: bool = typer.Option(False, "--json", help="print the list as JSON")) -> None:
+    """List every estimator (built-in, entry point of group h4bench.estimators) and the plugins that fail to load."""
+    from scenarios.judging import describe_estimators
+
+    found = describe_estimators()
+    if as_json:
+        typer.echo(_json_text(found))
+        return
+    for e in found["estimators"]:
+        level = "" if e["level"] is None else f" level {e['level']:g}"
+        typer.echo(f"{e['name']:14s} {e['kind']:11s} rigorous={str(e['rigorous']):5s}{level:11s} "
+                   f"[{e['origin']}] {e['description']}")
+    for b in found["broken"]:
+        typer.secho(f"{b['name']:14s} BROKEN: {b['error']}", fg=typer.colors.RED)
 
 
 @app.command()
