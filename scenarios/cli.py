@@ -303,7 +303,9 @@ def identify(
     torque_timing: str = typer.Option("hold", help="H4: hold (each logged torque is a command held over its "
                                       "step: a controller's log, the simulator's) | sample (a torque measured "
                                       "at the sample instant)"),
-    method: str = typer.Option("hull", help="hull | cgsp | wls"),
+    method: str = typer.Option("hull", help="estimator(s): a name (hull | cgsp | wls | h4bench estimators), "
+                               "package.module:attribute, a comma-separated list or all; judged against the "
+                               "exact hull (narrower-than-hull verdict)"),
     prior: Optional[Path] = typer.Option(None, help="per-parameter prior: .toml ([Imot1] lower = .. upper = ..) "
                                          "or .csv (name,lower,upper); unnamed parameters keep the pair below"),
     prior_lower: str = typer.Option("0.0", help="prior lower bound of every parameter (not in --prior)"),
@@ -355,9 +357,15 @@ def identify(
             typer.echo("base parameters (base <- standard):")
             for n, e in zip(result["parameters"], result["parameter_expressions"]):
                 typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
+    if result.get("kind") == "identify" and not as_json:
+        unsound = result.get("unsound") or []
+        typer.echo("narrower-than-hull check: " + (f"UNSOUND {', '.join(unsound)}" if unsound else
+                   "no guaranteed box is narrower than the exact hull" if result.get("hull_reference") else
+                   "not run (no hull box)"))
     if result.get("consistent") is False:
-        failed = [m for m in result["methods"].values() if m.get("status") != "ok"]
-        smallest = failed[0]["min_bound"] if failed else result["wls"]["consistency"]["min_bound"]
+        failed = [m for m in result["methods"].values() if m.get("min_bound") is not None]
+        smallest = (failed[0]["min_bound"] if failed else result.get("inconsistency", {}).get("min_bound")
+                    or result["wls"]["consistency"]["min_bound"])
         typer.secho(f"error: the data are inconsistent with the bound (proven); the smallest consistent bound "
                     f"is {smallest:.6g} N m", fg=typer.colors.RED, err=True)
         raise typer.Exit(EXIT_INCONSISTENT)

@@ -40,15 +40,17 @@ EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (Incons
 
 
 def check_method(method) -> str:
-    """``"wls"`` or a box estimator the registry resolves (:func:`ident.estimators.registry.get`); ValueError
-    naming the choices otherwise."""
-    if method == "wls":
-        return method
+    """One method or a comma-separated list (``hull,cgsp``; ``all`` = every registered estimator; names of the
+    registry, entry points or ``package.module:attribute``, :func:`scenarios.judging.parse_methods`); ``wls`` is
+    the registry's WLS box plus the %sigma table (``result["wls"]``). ValueError naming the choices otherwise;
+    returns the method string."""
+    from scenarios.judging import parse_methods
+
     try:
-        registry.get(method)
-    except (EstimatorError, TypeError) as exc:
-        raise ValueError(f"method must be one of {METHODS} (or an estimator plugin), got {method!r}: {exc}") \
-            from None
+        parse_methods(method)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"method must be one or more of {METHODS} (comma-separated, all, or an estimator plugin), "
+                         f"got {method!r}: {exc}") from None
     return method
 
 
@@ -219,7 +221,7 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     torque_timing : "hold" (each logged torque is a command held over its step: the regressor at mid-step) or
     "sample" (a torque measured at the sample instant), :func:`ident.processing.filtering.derivatives`.
     Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
-    (the method's status ``failed`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
+    (the method's status ``inconsistent`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
     """
     check_method(method)
     b = _joint_bounds(bound)
@@ -413,28 +415,40 @@ def wls_consistency(W, y, bound, prior, min_bound: float | None = None) -> dict:
 
 
 def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: int, names, joint_of_row, out) -> dict:
-    """WLS or a box method on (W, y, bound) into ``result`` (a proven inconsistency is recorded, with
-    ``consistent`` False), then ``result.json`` into the owned folder ``out``; returns ``result``."""
-    if method == "wls":
+    """The methods (``method``: one or a comma-separated list, :func:`check_method`) on (W, y, bound), judged side
+    by side with the exact hull as reference (:mod:`scenarios.judging`: no truth, so ``enclosed`` is null, but the
+    narrower-than-hull check runs), into ``result``; ``wls`` also gives the %sigma table (``result["wls"]``). A
+    proven inconsistency is recorded (status ``inconsistent`` with ``min_bound``; ``consistent`` False), then
+    ``result.json`` is written into the owned folder ``out``; returns ``result``."""
+    from scenarios import judging
+
+    methods = judging.parse_methods(method)
+    groups = np.asarray(joint_of_row, dtype=np.int64)
+    outcomes, hull = judging.run_methods(methods, W, y, bound, prior, {"groups": groups})
+    if hull is None:  # no method other than the hull: still the reference of the verdict
+        hull = outcomes.get("hull") or judging.run_method("hull", W, y, bound, prior)
+    ref = judging.hull_reference(W, y, bound, prior, hull.box) if hull.status == "ok" else None
+    result["methods"] = judging.judge(outcomes, ref, None, list(names))
+    result["hull_reference"] = None if ref is None else ref.describe()
+    for name, o in outcomes.items():
+        if o.status == "inconsistent":
+            result["methods"][name].update(error=type(o.error).__name__, min_bound=getattr(o.error, "min_bound", None),
+                                           scale_lower=getattr(o.error, "scale_lower", None))
+    if hull.status == "ok":
+        result["consistent"] = True
+    elif hull.status == "inconsistent":
+        result["consistent"] = False
+        result.setdefault("inconsistency", {"min_bound": getattr(hull.error, "min_bound", None),
+                                            "scale_lower": getattr(hull.error, "scale_lower", None)})
+    result["unsound"] = sorted(n for n, m in result["methods"].items() if m.get("unsound"))
+    if "wls" in methods:
         w = ident.wls(W, y, joints=joints, names=names, joint_of_row=joint_of_row)
         result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
                          "rel_std_percent": np.asarray(w.rel_std_percent).tolist(),
                          "consistency": wls_consistency(W, y, bound, prior,
                                                         result.get("min_consistent_bound"))}
-        result["consistent"] = result["wls"]["consistency"]["consistent"]
-    else:
-        t0 = time.perf_counter()
-        try:
-            box = ident.estimate(W, y, bound, prior, method=method)
-            result["methods"][method] = {"status": "ok", "lower": box.lower.tolist(), "upper": box.upper.tolist(),
-                                         "enclosed": None, "width": box.width.tolist(),
-                                         "seconds": time.perf_counter() - t0}
-            result["consistent"] = True
-        except ident.InconsistentDataError as exc:
-            result["methods"][method] = {"status": "failed", "error": "InconsistentDataError", "message": str(exc),
-                                         "min_bound": exc.min_bound, "scale_lower": exc.scale_lower,
-                                         "seconds": time.perf_counter() - t0}
-            result["consistent"] = False
+        if result.get("consistent") is None:
+            result["consistent"] = result["wls"]["consistency"]["consistent"]
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         write_json(tmp / "result.json", result)
     return result

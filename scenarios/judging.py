@@ -62,6 +62,7 @@ class Outcome:
     box: ident.Box | None = None
     message: str | None = None
     seconds: float = 0.0
+    error: Exception | None = field(default=None, repr=False)  # the exception of an "inconsistent" / "failed"
 
 
 def run_method(method, W, y, bound, prior, context: dict | None = None) -> Outcome:
@@ -79,14 +80,14 @@ def run_method(method, W, y, bound, prior, context: dict | None = None) -> Outco
     try:
         box = registry.call(est, W, y, bound, prior, **(context or {}))
     except ident.InconsistentDataError as exc:
-        return Outcome(name, est, "inconsistent", message=str(exc), seconds=time.perf_counter() - t0)
+        return Outcome(name, est, "inconsistent", message=str(exc), seconds=time.perf_counter() - t0, error=exc)
     except ident.EstimatorError as exc:
-        return Outcome(name, est, "failed", message=str(exc), seconds=time.perf_counter() - t0)
+        return Outcome(name, est, "failed", message=str(exc), seconds=time.perf_counter() - t0, error=exc)
     except Exception as exc:  # noqa: BLE001 - a plugin that raises costs only its own entry
         where = traceback.extract_tb(exc.__traceback__)[-1]
         return Outcome(name, est, "failed", message=f"estimator {name!r} ({est.origin}) raised "
                        f"{type(exc).__name__}: {exc} (at {where.filename}:{where.lineno})",
-                       seconds=time.perf_counter() - t0)
+                       seconds=time.perf_counter() - t0, error=exc)
     return Outcome(name, est, "ok", box=box, seconds=time.perf_counter() - t0)
 
 
