@@ -221,16 +221,18 @@ def run(
     methods: Optional[str] = typer.Option(None, help="estimators a,b,c (names, package.module:attribute, or all: "
                                           "every registered one; h4bench estimators lists them), replacing the "
                                           "spec's [estimators] methods"),
+    runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
     from scenarios.campaign import CampaignInterrupted
     from scenarios.runner import run_scenario
 
+    _importable_from_cwd(methods)
     try:
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
                                   scheduler=scheduler, workers=workers, only=only, fresh=fresh,
-                                  methods=methods)
+                                  methods=methods, runs=runs)
     except CampaignInterrupted as exc:
         typer.secho(f"stopped: {exc}", fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130)
@@ -245,6 +247,13 @@ def run(
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
+
+
+def _importable_from_cwd(methods: str | None) -> None:
+    """A ``module:attribute`` method is imported as ``python -m`` would: the working directory first on sys.path
+    (so ``examples.shrunk_hull:estimate`` works from the repository's root; process-pool workers inherit it)."""
+    if methods and ":" in methods and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())
 
 
 def _json_text(result: dict) -> str:
@@ -323,6 +332,7 @@ def identify(
     """
     from scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError, check_method
 
+    _importable_from_cwd(method)
     try:
         try:
             check_method(method)
