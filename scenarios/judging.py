@@ -75,8 +75,8 @@ def run_method(method, W, y, bound, prior, context: dict | None = None) -> Outco
     try:
         est = registry.get(method)
     except Exception as exc:  # noqa: BLE001 - a plugin that cannot be loaded is reported, not raised
-        return Outcome(name, None, "failed", message=f"estimator {name!r}: {exc}",
-                       seconds=time.perf_counter() - t0)
+        text = str(exc) if repr(name) in str(exc) else f"estimator {name!r}: {exc}"
+        return Outcome(name, None, "failed", message=text, seconds=time.perf_counter() - t0, error=exc)
     try:
         box = registry.call(est, W, y, bound, prior, **(context or {}))
     except ident.InconsistentDataError as exc:

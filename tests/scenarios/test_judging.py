@@ -243,11 +243,16 @@ def critical(fake_dist, tmp_path_factory):
 
 
 def test_critical_campaign_flags_the_unsound_example_and_not_the_references(critical):
+    """On the 4 quick seeds the shrunk hull misses the truth in every run (the truth lies in one of its cut-off
+    10 % slices in some coordinate). There no hull LP point can be proven feasible (the set is thinner than the LP
+    tolerance), so the narrower-than-hull check has no proof and stays silent: the misses are the test. Over 50
+    critical runs the misses caught 38 (76 %); the ordinary campaign's proven check caught 50 of 50."""
     result, out = critical
     m = result["methods"]
     n = result["runs"]
     for name in (SHRUNK, "fakeshrunk"):
-        assert m[name]["flagged_runs"] >= 0.95 * n, (name, m[name])
+        assert m[name]["flagged_runs"] == m[name]["misses"] == n and m[name]["unsound_runs"] == 0, (name, m[name])
+    assert all(r["hull_reference"]["source"] == "relative HULL_RTOL" for r in _runs(out))
     for name in ("hull", "cgsp", "contractor"):
         assert m[name]["misses"] == 0 and m[name]["unsound_runs"] == 0 and m[name]["coverage"] == 1.0, name
         assert m[name]["coverage_ci"] == pytest.approx(list(judging.clopper_pearson(n, n)))
@@ -260,6 +265,10 @@ def test_critical_campaign_flags_the_unsound_example_and_not_the_references(crit
     assert "| method | kind | rigorous | coverage [95 % CI]" in report and "| fakeshrunk | guaranteed | False" in report
     assert (out / "coverage.png").stat().st_size > 10_000
     assert m["hull"]["miss_seeds"] == [] and len(m["hull"]["relative_width_median"]) == len(result["parameters"])
+
+
+def _runs(out: Path) -> list[dict]:
+    return [json.loads(f.read_text()) for f in sorted((out / "runs").glob("*.json"))]
 
 
 def test_the_method_list_is_part_of_the_campaign_provenance():
