@@ -49,8 +49,8 @@ def check_method(method) -> str:
     try:
         parse_methods(method)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"method must be one or more of {METHODS} (comma-separated, all, or an estimator plugin), "
-                         f"got {method!r}: {exc}") from None
+        raise ValueError(f"method must be one of {METHODS} (or several, comma-separated; all; or an estimator "
+                         f"plugin), got {method!r}: {exc}") from None
     return method
 
 
