@@ -246,7 +246,8 @@ def test_critical_campaign_flags_the_unsound_example_and_not_the_references(crit
     """On the 4 quick seeds the shrunk hull misses the truth in every run (the truth lies in one of its cut-off
     10 % slices in some coordinate). There no hull LP point can be proven feasible (the set is thinner than the LP
     tolerance), so the narrower-than-hull check has no proof and stays silent: the misses are the test. Over 50
-    critical runs the misses caught 38 (76 %); the ordinary campaign's proven check caught 50 of 50."""
+    critical runs the misses caught 38 (76 %), over 200 caught 156 (78 %); the ordinary campaign's proven check
+    caught 50 of 50."""
     result, out = critical
     m = result["methods"]
     n = result["runs"]
