@@ -24,7 +24,8 @@ may lie inside H). A guaranteed box B is **unsound** when in some coordinate ``B
 ``B_hi_j < h_hi_j - tol_hi_j``: it then excludes a point proven to lie in S (so it is not an outer enclosure, a
 proof). Where no point is proven (S empty within the LP tolerance, or thinner than the rounding: the
 ``enclosure-critical`` campaign), the tolerance falls back to :data:`HULL_RTOL` relative to the hull's
-endpoints, ``tol_j = HULL_RTOL * max(|h_lo_j|, |h_hi_j|)`` (``hull_tolerance`` in the entry says which applied):
+endpoints, ``tol_j = HULL_RTOL * max(|h_lo_j|, |h_hi_j|)`` (``hull_tolerance`` in the entry: its ``source``,
+"proven points" or "relative HULL_RTOL", and the tolerances per coordinate, ``lower`` and ``upper``):
 a box narrower than that is flagged, but without a proof. A method that says "proven empty" while a point of S
 is proven is unsound in every coordinate. A statistical box claims no enclosure: it is never unsound.
 """
@@ -183,6 +184,11 @@ class HullReference:
         """(p,) bool: coordinates where [lower, upper] is narrower than the hull beyond its tolerance."""
         return (np.asarray(lower) > self.lower + self.tol_lower) | (np.asarray(upper) < self.upper - self.tol_upper)
 
+    def tolerance(self) -> dict:
+        """The check's tolerance per coordinate, as written in a guaranteed method's entry (``hull_tolerance``)."""
+        return {"source": self.source, "lower": self.tol_lower.tolist(), "upper": self.tol_upper.tolist(),
+                **({"rtol": HULL_RTOL} if self.source != "proven points" else {})}
+
     def describe(self) -> dict:
         return {"lower": self.lower.tolist(), "upper": self.upper.tolist(), "source": self.source,
                 "proven_points": self.proven, "rtol": HULL_RTOL,
@@ -282,7 +288,7 @@ def judge(outcomes: dict, reference: HullReference | None, truth=None, names=Non
                     nm = list(names or box.names)
                     e["narrower_than_hull"] = [nm[j] for j in np.flatnonzero(bad)]
                     e["unsound"] = bool(bad.any())
-                    e["hull_tolerance"] = reference.source
+                    e["hull_tolerance"] = reference.tolerance()
             e["info"] = _info(box)
         else:
             e["message"] = o.message
@@ -291,7 +297,7 @@ def judge(outcomes: dict, reference: HullReference | None, truth=None, names=Non
             if guaranteed and o.status == "inconsistent" and reference is not None and reference.proven:
                 e["unsound"] = True  # claims "empty" while a point of S is proven
                 e["narrower_than_hull"] = list(names or [])
-                e["hull_tolerance"] = reference.source
+                e["hull_tolerance"] = reference.tolerance()
         if guaranteed and "unsound" not in e:
             e["unsound"] = None if reference is None else False
             e.setdefault("narrower_than_hull", [])

@@ -106,7 +106,8 @@ def test_guaranteed_references_are_never_narrower_than_the_hull(judged):
         assert m["status"] == "ok" and m["unsound"] is False and m["narrower_than_hull"] == [], (name, m)
         assert min(m["width_vs_hull"]) >= 1.0 - 1e-6, (name, m["width_vs_hull"])
         assert m["kind"] == "guaranteed" and m["origin"] == "built-in" and m["all_enclosed"]
-    assert entries["hull"]["hull_tolerance"] == "proven points"
+    tol = entries["hull"]["hull_tolerance"]
+    assert tol["source"] == "proven points" and len(tol["lower"]) == len(tol["upper"]) == 3
 
 
 def test_the_shrunk_example_is_flagged_and_the_user_estimator_is_not(judged):
