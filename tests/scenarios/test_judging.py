@@ -339,3 +339,16 @@ def test_identify_gives_the_narrower_than_hull_verdict_without_a_truth(tmp_path)
     assert m["wls"]["kind"] == "statistical" and len(result["wls"]["rel_std_percent"]) == 14
     saved = json.loads((tmp_path / "o" / "result.json").read_text())
     assert saved["unsound"] == [SHRUNK]
+
+
+def test_run_refuses_an_unknown_method_and_a_bad_run_count_before_running(tmp_path):
+    from typer.testing import CliRunner
+
+    from scenarios.cli import app
+
+    res = CliRunner().invoke(app, ["run", "enclosure", "--quick", "--methods", "hull,hulll", "--out",
+                                   str(tmp_path / "a")])
+    assert res.exit_code == 2 and "--methods" in res.output and "'hulll'" in res.output, res.output
+    res = CliRunner().invoke(app, ["run", "enclosure", "--quick", "--runs", "0", "--out", str(tmp_path / "b")])
+    assert res.exit_code == 2 and "runs must be an integer >= 1" in res.output, res.output
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
