@@ -339,6 +339,14 @@ def test_identify_gives_the_narrower_than_hull_verdict_without_a_truth(tmp_path)
     assert m["wls"]["kind"] == "statistical" and len(result["wls"]["rel_std_percent"]) == 14
     saved = json.loads((tmp_path / "o" / "result.json").read_text())
     assert saved["unsound"] == [SHRUNK]
+    from typer.testing import CliRunner
+
+    from scenarios.cli import app
+
+    res = CliRunner().invoke(app, ["identify", str(path), "--bound", "1.5", "--method", f"hull,{SHRUNK}", "--out",
+                                   str(tmp_path / "c")], env={"COLUMNS": "100"})
+    assert res.exit_code == 0, res.output
+    assert f"narrower-than-hull check: UNSOUND {SHRUNK}" in res.output
 
 
 def test_run_refuses_an_unknown_method_and_a_bad_run_count_before_running(tmp_path):
