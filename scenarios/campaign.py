@@ -322,14 +322,28 @@ def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: 
     """A campaign kind's files: ``widths.png`` (relative widths over the runs), ``report.md`` (``# Scenario
     `name`: title``, the kind's ``facts``, the throughput, one line per method from ``method_line(name, m)``, the
     median relative width table, ``tail``) and ``result.json``, atomically each."""
+    from scenarios.judging import judged_table, plot_coverage
     from scenarios.report import relative_width_table
     from scenarios.rundir import write_json
     from sim.dataset import atomic_write_bytes
 
     out = Path(out)
     plot_relative_widths(result, runs, out / "widths.png")
+    plot_coverage(result["methods"], out / "coverage.png")
     lines = [f"# Scenario `{result['scenario']}`: {title}", "", *facts, *throughput_lines(result["campaign"])]
     lines += [f"- {name}: {method_line(name, m)}" for name, m in result["methods"].items()]
+    lines += ["", "## Every method side by side", "",
+              "Coverage: runs whose box encloses the truth / runs (a run without a box does not cover), with its exact "
+              "Clopper-Pearson 95 % interval; level: a statistical method's stated confidence; unsound runs: the "
+              "guaranteed box was narrower than the exact hull beyond the hull's tolerance (see "
+              "`scenarios/judging.py`); width vs hull: per parameter the median over the runs of width / hull "
+              "width, then the median over the parameters.", "", judged_table(result["methods"], campaign=True), "",
+              "Plot: `coverage.png` (coverage against median width vs hull, one point per method).", ""]
+    failing = {n: m["failure_messages"] for n, m in result["methods"].items() if m.get("failure_messages")}
+    for name, msgs in failing.items():
+        lines += [f"- {name} failed on {len(result['methods'][name]['failed_runs'])} run(s): {msgs[0]}"]
+    if failing:
+        lines += [""]
     lines += ["", "## Median relative width (width / |true value|) per parameter", "", relative_width_table(result),
               "", *tail, "Plot: `widths.png`."]
     atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
@@ -363,31 +377,12 @@ def summarise(spec: dict, seed: int, runs: list[dict], info: dict) -> dict:
 
 
 def summarise_methods(runs: list[dict]) -> dict:
-    """Per method over the runs: misses (and those where the bound covered the residual), failed runs,
-    median and p90 relative widths (width / |true|), median seconds."""
-    first = runs[0]
-    methods = {}
-    for name in first["methods"]:
-        ok = [r for r in runs if r["methods"][name].get("status") == "ok"]
-        enclosed = np.array([r["methods"][name]["enclosed"] for r in ok]) if ok else np.zeros((0, len(first["true"])))
-        misses = [r["seed"] for r in ok if not r["methods"][name]["all_enclosed"]]
-        misses_covered = [r["seed"] for r in ok if not r["methods"][name]["all_enclosed"] and r["bound_covers_residual"]]
-        rel_w = np.array([np.asarray(r["methods"][name]["width"]) / np.abs(np.asarray(r["true"])) for r in ok])
-        methods[name] = {
-            "status": "ok",
-            "lower": first["methods"][name].get("lower"),
-            "upper": first["methods"][name].get("upper"),
-            "enclosed": enclosed.all(axis=0).tolist() if len(ok) else [],
-            "all_enclosed": bool(len(ok) == len(runs) and enclosed.all()),
-            "misses": len(misses),
-            "miss_seeds": misses,
-            "misses_with_bound_covering_residual": misses_covered,
-            "failed_runs": [r["seed"] for r in runs if r["methods"][name].get("status") != "ok"],
-            "relative_width_median": np.median(rel_w, axis=0).tolist() if len(ok) else [],
-            "relative_width_p90": np.percentile(rel_w, 90, axis=0).tolist() if len(ok) else [],
-            "seconds": float(np.median([r["methods"][name]["seconds"] for r in runs])),
-        }
-    return methods
+    """Per method over the runs (:func:`scenarios.judging.summarise_methods`): the claims, misses (and those where
+    the bound covered the residual), failed runs, unsound runs, coverage with its Clopper-Pearson interval,
+    median width vs hull, median and p90 relative widths (width / |true|), median seconds."""
+    from scenarios.judging import summarise_methods as judged
+
+    return judged(runs)
 
 
 def plot_relative_widths(result: dict, runs: list[dict], path: Path) -> None:
@@ -398,8 +393,13 @@ def plot_relative_widths(result: dict, runs: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     names = result["parameters"]
-    fig, axes = plt.subplots(1, len(result["methods"]), figsize=(7 * len(result["methods"]), 5), squeeze=False)
-    for ax, (name, m) in zip(axes[0], result["methods"].items()):
+    k = len(result["methods"])
+    cols = min(k, 3)
+    rows = -(-k // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(7 * cols, 5 * rows), squeeze=False)
+    for ax in axes.flat[k:]:
+        ax.set_visible(False)
+    for ax, (name, m) in zip(axes.flat, result["methods"].items()):
         rel = [np.asarray(r["methods"][name]["width"]) / np.abs(np.asarray(r["true"])) for r in runs
                if r["methods"][name].get("status") == "ok"]
         if rel:

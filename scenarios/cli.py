@@ -164,11 +164,17 @@ def _print_summary(result: dict) -> None:
         if result.get(key) is not None:
             console.print(f"{key}: {_num(result[key])} N m")
     for name, m in result.get("methods", {}).items():
-        if m.get("status") != "ok":
-            console.print(f"[red]{name}: {m.get('message')}[/red]")
+        if m.get("status") != "ok" and "runs" not in m:
+            console.print(f"{name}: {m['status']}: {m.get('message')}", style="red", markup=False)
         elif "misses" in m:
+            cov = "" if m.get("coverage") is None else (
+                f"; coverage {m['coverage']:.3g} [{m['coverage_ci'][0]:.3g}, {m['coverage_ci'][1]:.3g}]")
             console.print(f"{name}: {m['misses']} miss(es) in {result['runs']} runs; with the bound covering the "
-                          f"residual: {len(m['misses_with_bound_covering_residual'])}")
+                          f"residual: {len(m['misses_with_bound_covering_residual'])}; unsound runs "
+                          f"{m.get('unsound_runs')}; failed runs {len(m.get('failed_runs', []))}{cov}", markup=False)
+        elif m.get("unsound"):
+            console.print(f"{name}: UNSOUND: narrower than the exact hull in {', '.join(m['narrower_than_hull'])}",
+                          style="red", markup=False)
 
 
 class _Progress:
@@ -212,15 +218,21 @@ def run(
     workers: Optional[int] = typer.Option(None, help="local worker processes for campaigns"),
     only: Optional[int] = typer.Option(None, help="campaigns: re-run this run index alone, with its replay"),
     fresh: bool = typer.Option(False, "--fresh", help="campaigns: recompute every run instead of resuming"),
+    methods: Optional[str] = typer.Option(None, help="estimators a,b,c (names, package.module:attribute, or all: "
+                                          "every registered one; h4bench estimators lists them), replacing the "
+                                          "spec's [estimators] methods"),
+    runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
     from scenarios.campaign import CampaignInterrupted
     from scenarios.runner import run_scenario
 
+    _importable_from_cwd(methods)
     try:
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
-                                  scheduler=scheduler, workers=workers, only=only, fresh=fresh)
+                                  scheduler=scheduler, workers=workers, only=only, fresh=fresh,
+                                  methods=methods, runs=runs)
     except CampaignInterrupted as exc:
         typer.secho(f"stopped: {exc}", fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130)
@@ -237,11 +249,35 @@ def run(
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
 
 
+def _importable_from_cwd(methods: str | None) -> None:
+    """A ``module:attribute`` method is imported as ``python -m`` would: the working directory first on sys.path
+    (so ``examples.shrunk_hull:estimate`` works from the repository's root; process-pool workers inherit it)."""
+    if methods and ":" in methods and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())
+
+
 def _json_text(result: dict) -> str:
     """The result as strict JSON (non-finite numbers null, as in result.json)."""
     from scenarios.rundir import finite_json
 
     return finite_json(result)
+
+
+@app.command()
+def estimators(as_json: bool = typer.Option(False, "--json", help="print the list as JSON")) -> None:
+    """List every estimator (built-in, entry point of group h4bench.estimators) and the plugins that fail to load."""
+    from scenarios.judging import describe_estimators
+
+    found = describe_estimators()
+    if as_json:
+        typer.echo(_json_text(found))
+        return
+    for e in found["estimators"]:
+        level = "" if e["level"] is None else f" level {e['level']:g}"
+        typer.echo(f"{e['name']:14s} {e['kind']:11s} rigorous={str(e['rigorous']):5s}{level:11s} "
+                   f"[{e['origin']}] {e['description']}")
+    for b in found["broken"]:
+        typer.secho(f"{b['name']:14s} BROKEN: {b['error']}", fg=typer.colors.RED)
 
 
 @app.command()
@@ -276,7 +312,9 @@ def identify(
     torque_timing: str = typer.Option("hold", help="H4: hold (each logged torque is a command held over its "
                                       "step: a controller's log, the simulator's) | sample (a torque measured "
                                       "at the sample instant)"),
-    method: str = typer.Option("hull", help="hull | cgsp | wls"),
+    method: str = typer.Option("hull", help="estimator(s): a name (hull | cgsp | wls | h4bench estimators), "
+                               "package.module:attribute, a comma-separated list or all; judged against the "
+                               "exact hull (narrower-than-hull verdict)"),
     prior: Optional[Path] = typer.Option(None, help="per-parameter prior: .toml ([Imot1] lower = .. upper = ..) "
                                          "or .csv (name,lower,upper); unnamed parameters keep the pair below"),
     prior_lower: str = typer.Option("0.0", help="prior lower bound of every parameter (not in --prior)"),
@@ -296,6 +334,7 @@ def identify(
     """
     from scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError, check_method
 
+    _importable_from_cwd(method)
     try:
         try:
             check_method(method)
@@ -331,9 +370,15 @@ def identify(
             typer.echo("base parameters (base <- standard):")
             for n, e in zip(result["parameters"], result["parameter_expressions"]):
                 typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
+    if result.get("kind") == "identify" and not as_json:
+        unsound = result.get("unsound") or []
+        typer.echo("narrower-than-hull check: " + (f"UNSOUND {', '.join(unsound)}" if unsound else
+                   "no guaranteed box is narrower than the exact hull" if result.get("hull_reference") else
+                   "not run (no hull box)"))
     if result.get("consistent") is False:
-        failed = [m for m in result["methods"].values() if m.get("status") != "ok"]
-        smallest = failed[0]["min_bound"] if failed else result["wls"]["consistency"]["min_bound"]
+        failed = [m for m in result["methods"].values() if m.get("min_bound") is not None]
+        smallest = (failed[0]["min_bound"] if failed else result.get("inconsistency", {}).get("min_bound")
+                    or result["wls"]["consistency"]["min_bound"])
         typer.secho(f"error: the data are inconsistent with the bound (proven); the smallest consistent bound "
                     f"is {smallest:.6g} N m", fg=typer.colors.RED, err=True)
         raise typer.Exit(EXIT_INCONSISTENT)

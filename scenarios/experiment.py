@@ -16,6 +16,8 @@ import ident
 import sim
 from ident.processing.filtering import ProcessingSettings
 from ident.processing.processing import Equation, build_equation
+from ident.estimators import registry
+from scenarios import judging
 from scenarios.budget import error_budget
 from scenarios.explain import width_analysis
 
@@ -39,6 +41,9 @@ class ExperimentRun:
     bound_raw: float
     boxes: dict = field(default_factory=dict)  # method -> Box
     failures: dict = field(default_factory=dict)  # method -> message (e.g. inconsistent data)
+    outcomes: dict = field(default_factory=dict)  # method -> scenarios.judging.Outcome
+    hull_ref: object = None  # scenarios.judging.HullReference of the exact hull (None: no hull box)
+    claims: dict = field(default_factory=dict)  # a kind's own box (not a registry method) -> (kind, rigorous)
     seconds: dict = field(default_factory=dict)
     wls: object = None
     min_consistent_bound: float = float("nan")
@@ -58,21 +63,15 @@ class ExperimentRun:
         eq = self.equation
         r = np.abs(self.residual)
         names = list(eq.names)
-        methods = {}
-        for name, box in self.boxes.items():
-            enclosed = box.contains(self.theta_true)
-            methods[name] = {
-                "status": "ok",
-                "lower": box.lower.tolist(),
-                "upper": box.upper.tolist(),
-                "enclosed": enclosed.tolist(),
-                "all_enclosed": bool(enclosed.all()),
-                "width": box.width.tolist(),
-                "seconds": self.seconds.get(name),
-                "info": {k: v for k, v in box.info.items() if isinstance(v, (int, float, str, bool, list))},
-            }
-        for name, message in self.failures.items():
-            methods[name] = {"status": "failed", "message": message, "seconds": self.seconds.get(name)}
+        outcomes = dict(self.outcomes)
+        for name in (*self.boxes, *self.failures):  # a kind's own boxes (e.g. the relaxed hull of the outliers)
+            if name not in outcomes:
+                kind, rigorous = self.claims.get(name, ("guaranteed", False))
+                est = registry.Estimator(name, name, kind, rigorous, origin="scenario")
+                ok = name in self.boxes
+                outcomes[name] = judging.Outcome(name, est, "ok" if ok else "inconsistent", self.boxes.get(name),
+                                                 None if ok else self.failures[name], self.seconds.get(name, 0.0))
+        methods = judging.judge(outcomes, self.hull_ref, self.theta_true, names)
         out = {
             "scenario": self.spec["name"],
             "kind": self.spec["kind"],
@@ -94,6 +93,7 @@ class ExperimentRun:
             "noise": {**self.spec["noise"], "bound": self.noise_bound, "description": self.noise_description},
             "prior": {"lower": self.prior.lower.tolist(), "upper": self.prior.upper.tolist()},
             "methods": methods,
+            "hull_reference": None if self.hull_ref is None else self.hull_ref.describe(),
             "budget": self.budget,
             "timings": self.timings,
             "duration": float(self.dataset.t[-1] - self.dataset.t[0]),
@@ -197,13 +197,7 @@ def estimate_boxes(run: ExperimentRun) -> None:
     t0 = time.perf_counter()
     run.min_consistent_bound = float(ident.min_consistent_bound(eq.W, eq.y, prior))
     run.seconds["min_consistent_bound"] = time.perf_counter() - t0
-    for method in run.spec["estimators"]["methods"]:
-        t0 = time.perf_counter()
-        try:
-            run.boxes[method] = ident.estimate(eq.W, eq.y, eq.bound, prior, method=method)
-        except ident.InconsistentDataError as exc:
-            run.failures[method] = str(exc)
-        run.seconds[method] = time.perf_counter() - t0
+    judge_methods(run, run.spec["estimators"]["methods"])
     if run.spec["estimators"]["wls"]:
         t0 = time.perf_counter()
         run.wls = ident.wls(eq.W, eq.y, joints=4, names=eq.names, joint_of_row=eq.joint)
@@ -216,15 +210,66 @@ def estimate_boxes(run: ExperimentRun) -> None:
         run.seconds["width_analysis"] = time.perf_counter() - t0
 
 
+def estimator_context(run: ExperimentRun) -> dict:
+    """The context the scenario gives the estimators: ``groups`` (the joint of each row, (m,) ints) and
+    ``instruments`` (:func:`instruments`, when they can be built row-aligned)."""
+    context = {"groups": np.asarray(run.equation.joint, dtype=np.int64)}
+    z = instruments(run)
+    if z is not None:
+        context["instruments"] = z
+    return context
+
+
+def instruments(run: ExperimentRun) -> np.ndarray | None:
+    """The IDIM-IV instruments (Janot, Vandanjon & Gautier, IEEE TCST 22(1), 2014), (m, p): the regressor
+    evaluated on the REFERENCE motion (the trajectory's noise-free q, sampled at the log's instants: no encoder
+    quantisation, no tracking error, no torque noise), processed by exactly the same chain as W (Butterworth,
+    derivatives, parallel filter and decimation, same settings) and restricted to W's rows (the same sample and
+    joint, so row-aligned with W). The reference's rows are computed with the speed threshold at 0 so that
+    every row W keeps exists; None if a row of W has no counterpart (never for a simulated run)."""
+    import dataclasses
+
+    eq, ds = run.equation, run.dataset
+    ref_q = np.asarray(run.reference.q, dtype=float)
+    if ref_q.shape != ds.q.shape:
+        return None
+    settings = dataclasses.replace(run.settings, speed_threshold=0.0)
+    ref = build_equation(run.geometry, sim.Dataset(ds.t, ref_q, ds.tau), run.bound_raw, settings, prior=run.prior,
+                         structure=run.spec["structure"]["regressor"])
+    key = {(int(s), int(j)): k for k, (s, j) in enumerate(zip(ref.sample, ref.joint))}
+    rows = [key.get((int(s), int(j))) for s, j in zip(eq.sample, eq.joint)]
+    if any(r is None for r in rows):
+        return None
+    return np.ascontiguousarray(ref.W[np.asarray(rows, dtype=np.int64)])
+
+
+def judge_methods(run: ExperimentRun, methods) -> None:
+    """Run ``methods`` (and the exact hull as reference) on the run's equation through
+    :func:`scenarios.judging.run_methods`; fills ``outcomes``, ``hull_ref``, ``boxes``, ``failures``, ``seconds``."""
+    eq, prior = run.equation, run.prior
+    # the instruments cost one more processing pass: built only for a method that may use them
+    needs = any(not isinstance(m, str) or m == "iv" or m not in registry.BUILTINS for m in methods)
+    context = estimator_context(run) if needs else {"groups": np.asarray(run.equation.joint, dtype=np.int64)}
+    outcomes, hull = judging.run_methods(list(methods), eq.W, eq.y, eq.bound, prior, context)
+    run.outcomes = outcomes
+    for name, o in outcomes.items():
+        run.seconds[name] = o.seconds
+        if o.status == "ok":
+            run.boxes[name] = o.box
+        else:
+            run.failures[name] = o.message
+    run.hull_ref = None
+    if hull is not None and hull.status == "ok":
+        run.hull_ref = judging.hull_reference(eq.W, eq.y, eq.bound, prior, hull.box)
+        if "hull" not in outcomes:
+            run.seconds["hull_reference"] = hull.seconds
+
+
 def estimate_hull(run: ExperimentRun) -> None:
     """The ordinary hull on the run's equation: a box, or the failure message when the set is proven empty."""
     eq = run.equation
     t0 = time.perf_counter()
     run.min_consistent_bound = float(ident.min_consistent_bound(eq.W, eq.y, run.prior))
     t1 = time.perf_counter()
-    try:
-        run.boxes["hull"] = ident.estimate(eq.W, eq.y, eq.bound, run.prior, method="hull")
-    except ident.InconsistentDataError as exc:
-        run.failures["hull"] = str(exc)
-    run.seconds["hull"] = time.perf_counter() - t1
+    judge_methods(run, ["hull"])
     run.seconds["min_consistent_bound"] = t1 - t0

@@ -40,15 +40,17 @@ EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (Incons
 
 
 def check_method(method) -> str:
-    """``"wls"`` or a box estimator the registry resolves (:func:`ident.estimators.registry.get`); ValueError
-    naming the choices otherwise."""
-    if method == "wls":
-        return method
+    """One method or a comma-separated list (``hull,cgsp``; ``all`` = every registered estimator; names of the
+    registry, entry points or ``package.module:attribute``, :func:`scenarios.judging.parse_methods`); ``wls`` is
+    the registry's WLS box plus the %sigma table (``result["wls"]``). ValueError naming the choices otherwise;
+    returns the method string."""
+    from scenarios.judging import parse_methods
+
     try:
-        registry.get(method)
-    except (EstimatorError, TypeError) as exc:
-        raise ValueError(f"method must be one of {METHODS} (or an estimator plugin), got {method!r}: {exc}") \
-            from None
+        parse_methods(method)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"method must be one of {METHODS} (or several, comma-separated; all; or an estimator "
+                         f"plugin), got {method!r}: {exc}") from None
     return method
 
 
@@ -220,7 +222,7 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     "sample" (a torque measured at the sample instant), :func:`ident.processing.filtering.derivatives`;
     pairs : ``--pairs`` (``auto`` or ``NAME:NAME,...``): the feasible set's projections, ``feasible_set.png``.
     Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
-    (the method's status ``failed`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
+    (the method's status ``inconsistent`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
     """
     check_method(method)
     _pairs(pairs, ident.PARAMETER_NAMES)  # a bad --pairs fails before the log is read
@@ -429,37 +431,49 @@ def _pairs(pairs, names):
 
 def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: int, names, joint_of_row, out,
                         pairs: str | None = None) -> dict:
-    """WLS or a box method on (W, y, bound) into ``result`` (a proven inconsistency is recorded, with
-    ``consistent`` False), then ``result.json`` into the owned folder ``out``; returns ``result``."""
-    if method == "wls":
+    """The methods (``method``: one or a comma-separated list, :func:`check_method`) on (W, y, bound), judged side
+    by side with the exact hull as reference (:mod:`scenarios.judging`: no truth, so ``enclosed`` is null, but the
+    narrower-than-hull check runs), into ``result``; ``wls`` also gives the %sigma table (``result["wls"]``). A
+    proven inconsistency is recorded (status ``inconsistent`` with ``min_bound``; ``consistent`` False), then
+    ``result.json`` is written into the owned folder ``out``; ``pairs`` (``--pairs``) adds the feasible set's
+    projections (``feasible_set.png``, drawn with the hull's box); returns ``result``."""
+    from scenarios import judging
+
+    methods = judging.parse_methods(method)
+    groups = np.asarray(joint_of_row, dtype=np.int64)
+    outcomes, hull = judging.run_methods(methods, W, y, bound, prior, {"groups": groups})
+    if hull is None:  # no method other than the hull: still the reference of the verdict
+        hull = outcomes.get("hull") or judging.run_method("hull", W, y, bound, prior)
+    ref = judging.hull_reference(W, y, bound, prior, hull.box) if hull.status == "ok" else None
+    result["methods"] = judging.judge(outcomes, ref, None, list(names))
+    result["hull_reference"] = None if ref is None else ref.describe()
+    for name, o in outcomes.items():
+        if o.status == "inconsistent":
+            result["methods"][name].update(error=type(o.error).__name__, min_bound=getattr(o.error, "min_bound", None),
+                                           scale_lower=getattr(o.error, "scale_lower", None))
+    if hull.status == "ok":
+        result["consistent"] = True
+    elif hull.status == "inconsistent":
+        result["consistent"] = False
+        result.setdefault("inconsistency", {"min_bound": getattr(hull.error, "min_bound", None),
+                                            "scale_lower": getattr(hull.error, "scale_lower", None)})
+    result["unsound"] = sorted(n for n, m in result["methods"].items() if m.get("unsound"))
+    if "wls" in methods:
         w = ident.wls(W, y, joints=joints, names=names, joint_of_row=joint_of_row)
         result["wls"] = {"theta": np.asarray(w.theta).tolist(), "std": np.asarray(w.std).tolist(),
                          "rel_std_percent": np.asarray(w.rel_std_percent).tolist(),
                          "consistency": wls_consistency(W, y, bound, prior,
                                                         result.get("min_consistent_bound"))}
-        result["consistent"] = result["wls"]["consistency"]["consistent"]
-    else:
-        t0 = time.perf_counter()
-        try:
-            box = ident.estimate(W, y, bound, prior, method=method)
-            result["methods"][method] = {"status": "ok", "lower": box.lower.tolist(), "upper": box.upper.tolist(),
-                                         "enclosed": None, "width": box.width.tolist(),
-                                         "seconds": time.perf_counter() - t0}
-            result["consistent"] = True
-        except ident.InconsistentDataError as exc:
-            result["methods"][method] = {"status": "failed", "error": "InconsistentDataError", "message": str(exc),
-                                         "min_bound": exc.min_bound, "scale_lower": exc.scale_lower,
-                                         "seconds": time.perf_counter() - t0}
-            result["consistent"] = False
+        if result.get("consistent") is None:
+            result["consistent"] = result["wls"]["consistency"]["consistent"]
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         chosen = _pairs(pairs, names)
         if chosen is not None and result.get("consistent") is not False:
             from scenarios.feasible import identify_projections
 
-            box = ident.Box(np.array(result["methods"][method]["lower"]), np.array(result["methods"][method]["upper"]),
-                            tuple(names)) if method in result["methods"] else None
+            box = hull.box if hull.status == "ok" else None
             units = ident.PARAMETER_UNITS if tuple(names) == tuple(ident.PARAMETER_NAMES) else None  # the H4's
             result["feasible_set"] = identify_projections(tmp, W, y, bound, prior, names, None if chosen == "auto"
-                                                          else chosen, box=box, method=method, units=units)
+                                                          else chosen, box=box, method="hull", units=units)
         write_json(tmp / "result.json", result)
     return result

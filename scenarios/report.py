@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from scenarios.judging import judged_table
+
 # The paper's Table 1 (CGSP boxes on the real H4) and Table 2 (WLS, %sigma): Poignet, Ramdani & Vivas,
 # CDC 2003, section 4.2. Fc there is Fs here.
 PAPER_TABLE1 = {
@@ -135,12 +137,43 @@ def summary_lines(result: dict) -> list[str]:
         f"- min consistent bound (Chebyshev fit over the prior) = {result['min_consistent_bound']:.4g} N m",
     ]
     for name, m in result["methods"].items():
+        claims = _claims(m)
         if m.get("status") == "ok":
-            lines.append(f"- {name}: all enclosed = {m['all_enclosed']}, mean width {np.mean(m['width']):.4g}, "
-                         f"{m['seconds']:.3g} s")
+            lines.append(f"- {name}{claims}: all enclosed = {m['all_enclosed']}, mean width {np.mean(m['width']):.4g}, "
+                         f"{m['seconds']:.3g} s{_verdict(m)}")
         else:
-            lines.append(f"- {name}: {m.get('message')}")
+            lines.append(f"- {name}{claims}: {m.get('status')}: {m.get('message')}{_verdict(m)}")
     return lines
+
+
+def _claims(m: dict) -> str:
+    if m.get("kind") is None:
+        return ""
+    level = f", level {m['level']:g}" if m.get("level") is not None else ""
+    return f" ({m['kind']}, {'rigorous' if m.get('rigorous') else 'not rigorous'}{level})"
+
+
+def _verdict(m: dict) -> str:
+    """A method's width against the exact hull and, for a guaranteed box, the narrower-than-hull verdict."""
+    w = [v for v in m.get("width_vs_hull") or [] if v is not None]
+    text = f"; width vs hull median {np.median(w):.3g} (min {min(w):.3g})" if w else ""
+    if m.get("unsound"):
+        text += f"; **UNSOUND: narrower than the exact hull in {', '.join(m['narrower_than_hull'])}**"
+    elif m.get("unsound") is False:
+        text += "; not narrower than the hull"
+    return text
+
+
+def hull_tolerance_line(result: dict) -> str:
+    """How the narrower-than-hull check's tolerance was obtained on this run (scenarios.judging)."""
+    ref = result.get("hull_reference")
+    if not ref:
+        return "No hull box (the exact hull failed or proved the set empty): no narrower-than-hull check."
+    if ref["source"] == "proven points":
+        return (f"Narrower-than-hull check: {ref['proven_points']} of the hull's LP points proven feasible (rigorous "
+                "residuals); a guaranteed box excluding one of them is unsound (a proof).")
+    return (f"Narrower-than-hull check: no hull LP point proven feasible; tolerance {ref['rtol']:g} x the hull's "
+            "endpoint magnitudes (a flag there is not a proof).")
 
 
 def heading(result: dict, what: str = "") -> str:
@@ -155,6 +188,8 @@ def write_paper_report(result: dict, out: Path, extra: str = "") -> None:
     text = "\n".join([
         heading(result), "",
         *summary_lines(result), "",
+        "## Every method side by side (the exact hull as reference)", "", judged_table(result["methods"]), "",
+        hull_tolerance_line(result), "",
         "## Table 1: guaranteed boxes (prior [" + f"{result['prior']['lower'][0]}, {result['prior']['upper'][0]}])",
         "", table1(result), "", "## Table 2: weighted least squares", "", table2(result), "",
         "## Why the boxes are this wide (slack x geometry)", "", width_table(result), "",

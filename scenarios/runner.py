@@ -29,15 +29,29 @@ def check_model(path) -> None:
 def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | None = None,
                  out: str | Path | None = None, quick: bool = False, progress=None,
                  scheduler: str | None = None, workers: int | None = None, only: int | None = None,
-                 fresh: bool = False) -> dict:
+                 fresh: bool = False, methods: str | list | None = None, runs: int | None = None) -> dict:
     """Run scenario ``name`` (or a TOML path) and write its folder; returns the result dict.
 
     progress : optional callable(stage, done, total) for a progress display; scheduler, workers : where a
     campaign runs (a Dask scheduler address, or the size of the local process pool); only : for a campaign,
     re-run that one run index alone into ``<out>/run-<index>/`` with its dataset, report and replay; fresh : for
-    a campaign, recompute every run instead of resuming.
+    a campaign, recompute every run instead of resuming; methods : the estimators (``"a,b,c"``, names or
+    ``module:attribute``, ``all``: :func:`scenarios.judging.parse_methods`, or a list of those) replacing the
+    spec's ``[estimators] methods`` (part of a campaign's provenance: a resumed campaign with other methods
+    recomputes its runs); runs : a campaign's number of runs (``campaign.runs``).
     """
     spec = registry.load_spec(name, quick=quick)
+    if methods is not None:
+        from scenarios.judging import parse_methods
+
+        try:
+            spec["estimators"]["methods"] = parse_methods(methods if isinstance(methods, str) else ",".join(methods))
+        except (TypeError, ValueError) as exc:
+            raise ScenarioError(f"--methods: {exc}") from None
+    if runs is not None:
+        if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+            raise ScenarioError(f"runs must be an integer >= 1, got {runs!r}")
+        spec["campaign"]["runs"] = runs
     if scheduler:
         spec["campaign"]["scheduler"] = scheduler
     if workers is not None:

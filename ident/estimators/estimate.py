@@ -175,6 +175,8 @@ def _hull_box(W, y, b, scalar, strips, prior, center, names, info, fallback, che
         fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
                  "their endpoints are coarser safe bounds or the prior's")
     lower, upper = res.lower, res.upper
+    if res.points is not None:  # (p, 2p) the LP solutions (unverified floats): the judging's inner points
+        info["points"] = np.array(res.points, dtype=float)
     info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "lp_failures", "converged")})
     return lower, upper
 
@@ -194,7 +196,8 @@ def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consist
     determined by the data), ``unidentifiable`` and ``cond`` (see :func:`identifiability`),
     ``nonempty_proven`` (a point of S was verified with rigorous rounding) and ``nearly_inconsistent``
     (S is empty or thinner than the LP tolerance, about 1e-9 relative: neither could be proven; the box
-    still encloses S), and per method ``lp_iterations``, ``lp_solves``, ``working_rows``, ``rounds``
+    still encloses S), for the hull ``points`` ((p, 2p) its LP solutions, floats not verified feasible), and per
+    method ``lp_iterations``, ``lp_solves``, ``working_rows``, ``rounds``
     (hull) or ``sweeps`` (cgsp). With ``check_consistency=False`` a cgsp box carries no emptiness check.
     Raises :class:`InconsistentDataError` when S is proven empty; ``ValueError``/``TypeError`` on bad input.
 

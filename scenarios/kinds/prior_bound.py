@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-import ident
-from scenarios import report
+from scenarios import judging, report
 from scenarios.experiment import ExperimentRun, estimate_boxes, run_experiment
 from scenarios.rundir import save_run_files, sim_progress
 from sim.dataset import atomic_write_bytes
@@ -39,13 +38,15 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
     for k, b in enumerate(bounds):
         progress("sweep", k, len(bounds))
         entry = {"bound": float(b), "consistent": bool(b >= run.min_consistent_bound), "methods": {}}
-        for method in spec["estimators"]["methods"]:
-            try:
-                box = ident.estimate(eq.W, eq.y, b, prior, method=method)
-                entry["methods"][method] = {"lower": box.lower.tolist(), "upper": box.upper.tolist(),
-                                            "enclosed": bool(box.contains(run.theta_true).all())}
-            except ident.InconsistentDataError as exc:
-                entry["methods"][method] = {"empty": True, "min_bound": exc.min_bound}
+        for method in spec["estimators"]["methods"]:  # a method that fails costs only its own entry
+            o = judging.run_method(method, eq.W, eq.y, b, prior, {"groups": np.asarray(eq.joint, dtype=np.int64)})
+            if o.status == "ok":
+                entry["methods"][o.name] = {"lower": o.box.lower.tolist(), "upper": o.box.upper.tolist(),
+                                            "enclosed": bool(o.box.contains(run.theta_true).all())}
+            elif o.status == "inconsistent":
+                entry["methods"][o.name] = {"empty": True, "min_bound": getattr(o.error, "min_bound", None)}
+            else:
+                entry["methods"][o.name] = {"failed": True, "message": o.message}
         sweep.append(entry)
     result = run.result()
     enclosing = [e["bound"] for e in sweep if e["methods"].get("hull", {}).get("enclosed")]
@@ -84,7 +85,7 @@ def plot_widths_vs_bound(result: dict, path: Path) -> None:
         xs, ws = [], []
         for e in result["sweep"]:
             m = e["methods"].get(method)
-            if m and not m.get("empty"):
+            if m and not m.get("empty") and not m.get("failed"):
                 xs.append(e["bound"])
                 ws.append((np.asarray(m["upper"]) - np.asarray(m["lower"])) / true)
         if xs:

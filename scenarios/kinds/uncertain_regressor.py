@@ -41,6 +41,7 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
     run = run_experiment(spec, seed, estimate=False, progress=sim_progress(progress))
     progress("point hull", 1, 4)
     estimate_hull(run)
+    run.claims["interval"] = ("guaranteed", True)  # rigorous outer box (see its module)
     # the distortion assumption: measured on a calibration simulation (same reference trajectory, another
     # noise seed, a robot whose parameters differ by up to calibration_spread), times a safety factor
     progress("calibration", 2, 4)

@@ -162,7 +162,7 @@ def test_urdf_inconsistent_bound_exit_3(log_csv, oracle, tmp_path):
     assert res.exit_code == 3, res.stderr
     assert "inconsistent" in res.stderr
     result = json.loads((tmp_path / "run" / "result.json").read_text())
-    assert result["consistent"] is False and result["methods"]["hull"]["status"] == "failed"
+    assert result["consistent"] is False and result["methods"]["hull"]["status"] == "inconsistent"
 
 
 def test_urdf_option_errors(log_csv, tmp_path):
