@@ -8,8 +8,15 @@ narrower-than-hull check, ``unsound: true``: every run of ``h4bench run enclosur
 hull,examples.shrunk_hull:estimate``) and, when the truth lies in a cut-off slice, it misses the truth (in
 ``enclosure-critical``, where no hull point can be proven: every quick run, 78 % of 200 runs).
 
-Use it as ``examples.shrunk_hull:estimate`` (from the repository's root) wherever a method name is accepted; run
-this file to see one verdict on a small synthetic problem.
+:func:`rounded_inward` is the other kind of defect, the one ``enclosure-critical`` exists for: a box that is
+right but for its last digits (each endpoint moved inward by :data:`RELATIVE` of its magnitude, about 4500 units
+in the last place: what an endpoint computed in plain floating point instead of a safe bound can lose). In an
+ordinary run the hull's LP points, proven feasible with outward rounding, lie closer to the hull's edges than that,
+so the narrower-than-hull check proves it unsound (4 of 4 quick runs); in a critical run no point can be proven,
+but the feasible set itself is about 1e-13 of the values wide, and the box misses the truth.
+
+Use them as ``examples.shrunk_hull:estimate`` and ``examples.shrunk_hull:rounded_inward`` (from the repository's
+root) wherever a method name is accepted; run this file to see one verdict on a small synthetic problem.
 """
 
 from __future__ import annotations
@@ -35,6 +42,28 @@ def estimate(W, y, bound, prior):
 estimate.kind = "guaranteed"
 estimate.rigorous = False
 estimate.description = f"UNSOUND on purpose: the exact hull shrunk by {FRACTION:.0%} of its width per side"
+
+
+RELATIVE = 1e-12  #: rounded_inward: each endpoint moves inward by this fraction of its magnitude
+
+
+def rounded_inward(W, y, bound, prior):
+    """The exact hull with each endpoint moved inward by :data:`RELATIVE` of its magnitude (never past the
+    midpoint: a box whose width is below that collapses to its midpoint).
+
+    W (N, p), y (N,), bound (N,) > 0 in y's units, prior an ``ident.Box``; returns an ``ident.Box`` (p,).
+    """
+    hull = ident.estimate(W, y, bound, prior, method="hull")
+    mid = hull.mid
+    lower = np.minimum(hull.lower + RELATIVE * np.abs(hull.lower), mid)
+    upper = np.maximum(hull.upper - RELATIVE * np.abs(hull.upper), mid)
+    return ident.Box(lower, upper, hull.names, info={"moved_inward_relative": RELATIVE})
+
+
+rounded_inward.kind = "guaranteed"
+rounded_inward.rigorous = False
+rounded_inward.description = (f"UNSOUND on purpose: the exact hull's endpoints moved inward by {RELATIVE:g} of their "
+                              "magnitude (a rounding-scale defect)")
 
 
 def _demo() -> dict:

@@ -23,6 +23,7 @@ from scenarios import judging
 
 ROOT = Path(__file__).resolve().parents[2]
 SHRUNK = "examples.shrunk_hull:estimate"
+ROUNDED = "examples.shrunk_hull:rounded_inward"  # the rounding-scale defect
 MINE = "examples.my_estimator:first_half_hull"
 GUARANTEED_REFERENCES = ("hull", "cgsp", "ellipsoid", "zonotope", "parallelotope", "contractor")
 
@@ -236,7 +237,7 @@ def critical(fake_dist, tmp_path_factory):
 
     sys.path.insert(0, str(fake_dist))
     try:
-        methods = ",".join([*GUARANTEED_REFERENCES, "ols", "iv", SHRUNK, "fakeshrunk", "brokenplug"])
+        methods = ",".join([*GUARANTEED_REFERENCES, "ols", "iv", SHRUNK, ROUNDED, "fakeshrunk", "brokenplug"])
         out = tmp_path_factory.mktemp("runs") / "critical"
         return run_scenario("enclosure-critical", quick=True, methods=methods, out=out, workers=2), out
     finally:
@@ -252,7 +253,7 @@ def test_critical_campaign_flags_the_unsound_example_and_not_the_references(crit
     result, out = critical
     m = result["methods"]
     n = result["runs"]
-    for name in (SHRUNK, "fakeshrunk"):
+    for name in (SHRUNK, ROUNDED, "fakeshrunk"):
         assert m[name]["flagged_runs"] == m[name]["misses"] == n and m[name]["unsound_runs"] == 0, (name, m[name])
     assert all(r["hull_reference"]["source"] == "relative HULL_RTOL" for r in _runs(out))
     for name in ("hull", "cgsp", "contractor"):
@@ -288,7 +289,7 @@ def paper(tmp_path_factory):
     from scenarios.runner import run_scenario
 
     out = tmp_path_factory.mktemp("runs") / "paper"
-    return run_scenario("paper", quick=True, methods=f"all,{SHRUNK},{MINE}", out=out), out
+    return run_scenario("paper", quick=True, methods=f"all,{SHRUNK},{ROUNDED},{MINE}", out=out), out
 
 
 def test_paper_scenario_judges_every_method_and_flags_only_the_shrunk_hull(paper):
@@ -296,6 +297,7 @@ def test_paper_scenario_judges_every_method_and_flags_only_the_shrunk_hull(paper
     m = result["methods"]
     assert result["hull_reference"]["source"] == "proven points"
     assert m[SHRUNK]["unsound"] is True and len(m[SHRUNK]["narrower_than_hull"]) >= 1
+    assert m[ROUNDED]["unsound"] is True  # 1e-12 relative inward: still past the hull's proven LP points
     for name in (*GUARANTEED_REFERENCES, MINE):
         assert m[name]["unsound"] is False and m[name]["all_enclosed"], (name, m[name])
     for name in ("ols", "wls", "iv"):
