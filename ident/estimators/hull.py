@@ -9,7 +9,10 @@ is given by the ``2p`` linear programs ``min / max theta_i over S``. This module
 * with **constraint generation**: the LPs are solved on a working set of rows (a few hundred, chosen spread
   out and near-active), every solution is checked against all N rows, the most violated rows are added and
   the violated LPs re-solved, until no row is violated by more than ``violation_tol * b_k``. This keeps the
-  LPs small, so ``N = 10^6`` rows cost a few passes over ``W``;
+  LPs small, so ``N = 10^6`` rows cost a few passes over ``W``. A check visits only the rows a solution can
+  violate: ``|W_k z| <= ||W_k diag(d)|| ||z / d||`` (Cauchy-Schwarz in the LP's scaled coordinates) rules out
+  every row whose strip leaves more room around the centre, so the rows near the set's boundary are gathered
+  once and each solution costs a product with them only;
 * with **safe bounds** (Neumaier & Shcherbina, Math. Program. 99, 2004): for ``min c^T x`` subject to
   ``bl <= A x <= bu``, ``xl <= x <= xu`` and *any* ``y``, with ``r = A^T y - c`` enclosed rigorously,
   ``mu = sum_i min(y_i bl_i, y_i bu_i) + sum_j min(-r_j xl_j, -r_j xu_j)`` (summed with downward rounding)
@@ -41,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.numerics.interval import down, mid_rad, point_matmul, up
+from ident.numerics.interval import TINY, U, down, mid_rad, mul, point_matmul, sub, sum_down, up
 from ident.numerics.lp import (
     LPError,
     LPModel,
@@ -128,23 +131,26 @@ def _violated_rows(W, dx_cols, m0, thr, skip):
     return np.concatenate(rows), np.vstack(devs)
 
 
-def _initial_sets(W, m0, half, initial_rows, pool_rows):
-    """The first working set and the candidate pool (sorted): rows ranked by the distance of the centre to
-    their strip boundary (slack / row norm), the nearest ``initial_rows`` plus ``2p`` spread rows, and the
-    nearest ``pool_rows``."""
-    n_rows, p = W.shape
-    n_pool = min(n_rows, max(pool_rows, initial_rows))
-    if n_pool < n_rows:
-        dist = np.abs(m0) - half
-        dist /= np.sqrt(np.einsum("ij,ij->i", W, W)) + 1e-300
-        pool = np.argpartition(-dist, n_pool - 1)[:n_pool]
-        pool = pool[np.argsort(-dist[pool])]
-        del dist
+def _row_norms(W, d):
+    """(N,) ``||W_k diag(d)||_2``: each row's Euclidean norm in the LP's scaled coordinates (one blocked pass)."""
+    out = np.empty(W.shape[0])
+    for s in range(0, W.shape[0], _CHUNK):
+        blk = W[s : s + _CHUNK] * d
+        out[s : s + _CHUNK] = np.sqrt(np.einsum("ij,ij->i", blk, blk))
+    return out
+
+
+def _initial_rows(norms, m0, half, initial_rows):
+    """The ``initial_rows`` rows nearest to the centre: the distance of the centre to the strip boundary,
+    ``(half_k - |m0_k|) / norms_k``, in the LP's scaled coordinates (all rows when there are fewer)."""
+    n_rows = m0.size
+    k = min(n_rows, initial_rows)
+    if 0 < k < n_rows:
+        dist = (half - np.abs(m0)) / (norms + 1e-300)
+        near = np.argpartition(dist, k - 1)[:k]
     else:
-        pool = np.arange(n_rows)
-    first = pool[: min(initial_rows, pool.size)]
-    first = np.union1d(first, _spread_rows(n_rows, 2 * p))
-    return first, np.sort(pool)
+        near = np.arange(k)
+    return near
 
 
 def _worst(v, candidates, violation_tol, add_rows):
@@ -158,37 +164,89 @@ def _worst(v, candidates, violation_tol, add_rows):
     return idx
 
 
+def _rows_term(bl, bu, y):
+    """``down(min(y bl, y bu))`` elementwise (0 where ``y = 0``): the row terms of the safe bound."""
+    return down(np.where(y > 0, y * np.where(y > 0, bl, 0.0), y * np.where(y < 0, bu, 0.0)))
+
+
+def _sum_down_cols(v, counts):
+    """Lower bounds of the exact column sums of ``v`` (m, k), column j holding at most ``counts[j]`` non-zero
+    terms (the zeros add exactly, so the error bound of a ``counts[j]``-term sum holds, any order)."""
+    s = np.sum(v, axis=0)
+    kn = np.array([_K(int(c)) for c in counts])
+    return down(s - up(up(kn * np.sum(np.abs(v), axis=0)) + TINY))
+
+
+def _K(n: int) -> float:
+    return 2.0 * (n + 2) * U  # the constant of ident.numerics.interval.dot_error for n terms
+
+
 def _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi):
     """The 2p safe bounds (LP j < p: lower of theta_j; LP p + j: upper) over the prior, then once more over the
-    box they give (it encloses the set, so the bound stays valid and the residual costs only that box)."""
+    box they give (it encloses the set, so the bound stays valid and the residual costs only that box).
+
+    The Neumaier-Shcherbina bound of :class:`~ident.numerics.lp.SafeBound` around ``theta0`` for the 2p dual
+    vectors at once: the rows of all duals gathered once (their shifted bounds ``bl - W theta0``, rounded
+    outward, are the same for every LP), the residuals ``W^T y - c`` of the 2p LPs by one enclosed product,
+    each LP's dot products and sums bounded as sums of its own non-zero terms.
+    """
     p = prior_lo.size
+    n_lp = 2 * p
+    rows = np.unique(np.concatenate([r for r, _ in duals])) if duals else np.zeros(0, dtype=np.int64)
+    Y = np.zeros((rows.size, n_lp))
+    for j, (r, yd) in enumerate(duals):
+        Y[np.searchsorted(rows, r), j] = yd
+    Y[~np.isfinite(Y)] = 0.0  # any y is valid: a non-finite dual is dropped, as SafeBound does
+    counts = np.count_nonzero(Y, axis=0)
+    A = W[rows]
+    alo, ahi = point_matmul(A, theta0)
+    sbl, sbu = down(bl[rows] - ahi), up(bu[rows] - alo)  # the strips around theta0, rounded outward
+    row_terms = np.where(Y != 0.0, _rows_term(sbl[:, None], sbu[:, None], Y), 0.0)  # (rows, 2p), exact zeros
+    g = A.T @ Y  # (p, 2p): W^T y, enclosed with the error bound of each LP's own number of terms
+    e = up(up(np.array([_K(int(c)) for c in counts]) * (np.abs(A).T @ np.abs(Y))) + TINY)
+    none = counts == 0  # no row: the product is exactly zero
+    glo = np.where(none, 0.0, down(g - e))
+    ghi = np.where(none, 0.0, up(g + e))
+    rlo, rhi = sub(glo, ghi, costs.T, costs.T)  # (p, 2p) the residuals r = W^T y - c, enclosed
+    cx0 = sum_down(down(costs * theta0), axis=1)  # (2p,) c^T theta0, rounded down
+    n_terms = counts + p
+
+    def bounds_over(box_lo, box_hi):
+        zl, zu = down(box_lo - theta0), up(box_hi - theta0)
+        plo, _ = mul(-rhi, -rlo, zl[:, None], zu[:, None])  # min of -r z over the box, per LP (p, 2p)
+        mu = _sum_down_cols(np.vstack([row_terms, plo]), n_terms)
+        return down(mu + cx0)
+
     lower, upper = prior_lo.copy(), prior_hi.copy()
-    bounds = [SafeBound(W[rows], bl[rows], bu[rows], costs[j], yd, theta0) for j, (rows, yd) in enumerate(duals)]
     for refine in (False, True):
         if refine and np.any(lower > upper):
             break  # the set is proven empty: no box to refine over
-        box_lo, box_hi = (lower.copy(), upper.copy()) if refine else (prior_lo, prior_hi)
-        for j in range(2 * p):
-            mu = bounds[j].over(box_lo, box_hi)
-            if j < p:
-                lower[j] = max(lower[j], mu)
-            else:
-                upper[j - p] = min(upper[j - p], -mu)
+        mu = bounds_over(lower.copy(), upper.copy()) if refine else bounds_over(prior_lo, prior_hi)
+        lower = np.maximum(lower, mu[:p])
+        upper = np.minimum(upper, -mu[p:])
     return lower, upper
 
 
 class _WorkingSet:
     """The rows of one hull model under constraint generation: the strips in the model's shifted coordinates
-    (centres ``m0``, half-widths ``half``), the rows added so far (``idx``, in the model's order), the pool."""
+    (centres ``m0``, half-widths ``half``), the rows added so far (``idx``, in the model's order).
 
-    def __init__(self, W, m0, half, unit, size, pool, model: LPModel) -> None:
+    Violation checks visit only the rows a point could violate: ``|W_k z| <= norms_k ||z / d||`` (Cauchy-Schwarz
+    in the LP's scaled coordinates, ``norms`` from :func:`_row_norms`), so a row whose strip has more room
+    ``half_k + tol unit_k - |m0_k|`` than ``norms_k ||z / d||`` cannot be violated by ``z``; the others are
+    checked exactly (float: the checks steer the LPs, the safe bounds make the endpoints rigorous)."""
+
+    _MARGIN = 1.0 + 1e-9  # on the Cauchy-Schwarz bound, for the rounding of the norms
+
+    def __init__(self, W, m0, half, unit, size, norms, d, violation_tol, model: LPModel) -> None:
         self.W, self.m0, self.half, self.unit, self.size = W, m0, half, unit, size
         self.inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
+        self.norms, self.d = norms, d
+        self.room = half + violation_tol * unit - np.abs(m0)
         self.mask = np.zeros(W.shape[0], dtype=bool)
-        self.idx = pool[:0]
-        self.pool = pool
+        self.idx = np.zeros(0, dtype=np.int64)
         self.model = model
-        self._pooled: dict = {}
+        self._pool: dict | None = None
 
     def add(self, rows) -> None:
         self.model.add_shifted_rows(self.W[rows], self.m0[rows] - self.half[rows], self.m0[rows] + self.half[rows],
@@ -196,9 +254,28 @@ class _WorkingSet:
         self.mask[rows] = True
         self.idx = np.concatenate([self.idx, rows])
 
+    def _pool_for(self, radius: float) -> dict | None:
+        """The rows that a point within ``radius`` (scaled) of the centre may violate, gathered; None when they are
+        more than a quarter of all rows (then the check is a pass over ``W``). Re-made when the radius grows past
+        the pool's or falls below half of it; the pool's radius is 1.25 times the asked one."""
+        pool = self._pool
+        if pool is None or radius > pool["radius"] or 2.0 * radius < pool["radius"]:
+            r = 1.25 * radius
+            rows = np.flatnonzero(self.norms * r > self.room)
+            if 4 * rows.size > self.W.shape[0]:
+                pool = {"radius": r, "rows": None}
+            else:
+                pool = {"radius": r, "rows": rows, "W": self.W[rows], "m0": self.m0[rows], "half": self.half[rows],
+                        "inv": self.inv_unit[rows], "norms": self.norms[rows], "room": self.room[rows]}
+            self._pool = pool
+        return pool if pool["rows"] is not None else None
+
+    def _radius(self, dz_cols) -> float:
+        return float(np.max(np.sqrt(np.sum((dz_cols / self.d[:, None]) ** 2, axis=0)))) * self._MARGIN
+
     def solve(self, cost, max_rounds, violation_tol, add_rows):
-        """Solve ``min cost^T theta`` on the working set, adding the pool's worst violated rows and re-solving
-        until the pool is clean. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the
+        """Solve ``min cost^T theta`` on the working set, adding the worst violated rows (of all N) and re-solving
+        until none is violated. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the
         duals' rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
         sol, rows = None, self.idx
         for _ in range(max_rounds):
@@ -208,32 +285,45 @@ class _WorkingSet:
                 return None, rows
             if sol.status == "infeasible":
                 return sol, rows
-            if self._pooled.get("rows") is not self.pool:  # the pool's rows, gathered once per pool
-                p = self.pool
-                self._pooled.update(rows=p, W=self.W[p], m0=self.m0[p], half=self.half[p], inv=self.inv_unit[p])
-            free = ~self.mask[self.pool]
-            if not free.any():
-                return sol, rows
-            pw = self._pooled
-            v = (np.abs(pw["W"] @ sol.z - pw["m0"]) - pw["half"]) * pw["inv"]
-            new = _worst(v[free], self.pool[free], violation_tol, add_rows)
+            radius = self._radius(sol.z[:, None])
+            pw = self._pool_for(radius)
+            if pw is None:  # far from the centre: every row is a candidate, one pass over W
+                cand = np.flatnonzero(~self.mask)
+                wz, m0, half, inv = _matvec(self.W, sol.z)[cand], self.m0[cand], self.half[cand], self.inv_unit[cand]
+            else:
+                sel = np.flatnonzero(pw["norms"] * radius > pw["room"])
+                sel = sel[~self.mask[pw["rows"][sel]]]
+                if not sel.size:
+                    return sol, rows
+                cand = pw["rows"][sel]
+                wz, m0, half, inv = pw["W"][sel] @ sol.z, pw["m0"][sel], pw["half"][sel], pw["inv"][sel]
+            new = _worst((np.abs(wz - m0) - half) * inv, cand, violation_tol, add_rows)
             if new.size == 0:
                 return sol, rows
             self.add(new)
         return sol, rows
 
     def full_check(self, dx_cols, violation_tol, add_rows) -> list:
-        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (one blocked pass); add the worst
-        violated rows of each to the model and the pool. Returns, per column, the rows added for it."""
-        rows, dev = _violated_rows(self.W, dx_cols, self.m0, self.half + violation_tol * self.unit, self.mask)
+        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (the candidates exactly, the others
+        by the bound); add the worst violated rows of each to the model. Returns, per column, the rows added."""
+        thr = self.half + violation_tol * self.unit
+        radius = self._radius(dx_cols)
+        pw = self._pool_for(radius)
+        if pw is None:
+            rows, dev = _violated_rows(self.W, dx_cols, self.m0, thr, self.mask)
+        else:
+            sel = np.flatnonzero(pw["norms"] * radius > pw["room"])
+            sel = sel[~self.mask[pw["rows"][sel]]]
+            cand = pw["rows"][sel]
+            dev = np.abs(pw["W"][sel] @ dx_cols - pw["m0"][sel, None])
+            hit = dev.max(axis=1) > thr[cand] if cand.size else np.zeros(0, dtype=bool)
+            rows, dev = cand[hit], dev[hit]
         if not rows.size:
             return [rows] * dx_cols.shape[1]
         v = (dev - self.half[rows, None]) * self.inv_unit[rows, None]
         new = [_worst(v[:, col], rows, violation_tol, add_rows) for col in range(dx_cols.shape[1])]
         if any(n.size for n in new):
-            added = np.unique(np.concatenate(new))
-            self.add(added)
-            self.pool = np.union1d(self.pool, added)
+            self.add(np.unique(np.concatenate(new)))
         return new
 
 
@@ -247,9 +337,8 @@ def interval_hull(
     scale: np.ndarray | None = None,
     row_scale: np.ndarray | None = None,
     center: np.ndarray | None = None,
-    initial_rows: int = 150,
-    pool_rows: int = 4000,
-    add_rows: int = 10,
+    initial_rows: int = 60,
+    add_rows: int = 20,
     violation_tol: float = 1e-10,
     lp_tol: float = 1e-9,
     max_rounds: int = 100,
@@ -266,13 +355,15 @@ def interval_hull(
     Scaling (units-invariant, module docstring and :class:`~ident.numerics.lp.LPModel`): rows by the power of
     two nearest ``1 / row_scale_k``, then columns to unit root-mean-square, shifted to ``center``.
 
-    Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary; the
-    nearest ``initial_rows`` form the first working set and the nearest ``pool_rows`` a candidate pool.
+    Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary (in the LP's
+    scaled coordinates); the nearest ``initial_rows`` and ``2p`` spread rows form the first working set.
     The 2p LPs are solved one after the other (all minima, then all maxima in reverse order, so that
-    consecutive optima are close and warm starts cheap); after each solve the pool is checked and up to
-    ``add_rows`` most violated rows are added and the LP re-solved, until the pool is clean. Then every
-    solution is checked against all N rows at once (one blocked pass over ``W``); violated LPs get their
-    worst rows added and are re-solved, until no row is off by more than ``violation_tol * scale``.
+    consecutive optima are close and warm starts cheap); after each solve the rows it may violate (the
+    Cauchy-Schwarz test of the module docstring, exact for the rest) are checked and up to ``add_rows`` most
+    violated rows are added and the LP re-solved, until none is violated. Then every solution is checked
+    against all N rows at once the same way; violated LPs get their worst rows added and are re-solved, until
+    no row is off by more than ``violation_tol * scale``. The safe bounds of the 2p LPs are evaluated together
+    (:func:`_safe_endpoints`).
 
     Inputs are assumed validated (finite, ``bl <= bu``, ``prior_lo <= prior_hi``). Returns a
     :class:`HullResult`; ``status == 'infeasible'`` when HiGHS found a working set infeasible (the caller
@@ -293,7 +384,9 @@ def interval_hull(
     theta0 = 0.5 * (prior_lo + prior_hi) if center is None else np.asarray(center, float)
     theta0 = np.clip(np.where(np.isfinite(theta0), theta0, 0.5 * (prior_lo + prior_hi)), prior_lo, prior_hi)
     m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
-    first, pool = _initial_sets(W, m0, half, initial_rows, pool_rows)
+    d = column_scale(W, power2_scale(size))
+    norms = _row_norms(W, d)
+    first = np.union1d(_initial_rows(norms, m0, half, initial_rows), _spread_rows(n_rows, 2 * p))
     n_lp = 2 * p
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
@@ -305,9 +398,8 @@ def interval_hull(
     lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
     todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
-        model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=column_scale(W, power2_scale(size)),
-                        tolerance=lp_tol, **PRIMAL_SIMPLEX)
-        ws = _WorkingSet(W, m0, half, unit, size, pool, model)
+        model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=d, tolerance=lp_tol, **PRIMAL_SIMPLEX)
+        ws = _WorkingSet(W, m0, half, unit, size, norms, d, violation_tol, model)
         ws.add(first)
         while todo and rounds < max_rounds and not infeasible:
             rounds += 1
