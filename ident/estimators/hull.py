@@ -44,11 +44,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.numerics.interval import TINY, U, down, mid_rad, mul, point_matmul, sub, sum_down, up
+from ident.numerics.interval import down, mid_rad, point_matmul, up
 from ident.numerics.lp import (
     LPError,
     LPModel,
     SafeBound,
+    SafeBounds,
     column_scale,
     power2_scale,
     safe_lower_bound,
@@ -68,6 +69,9 @@ __all__ = [
     "strip_bounds",
 ]
 
+#: a problem with at most this many rows is solved on all of them from the start (no constraint generation:
+#: on such small problems it saves nothing, and at bounds of 1e-12 relative HiGHS failed some working-set LPs)
+ALL_ROWS_UP_TO = 150
 _CHUNK = 8192  # rows per block when scanning W: temporaries stay small (no page-fault cost, little memory)
 
 
@@ -132,12 +136,8 @@ def _violated_rows(W, dx_cols, m0, thr, skip):
 
 
 def _row_norms(W, d):
-    """(N,) ``||W_k diag(d)||_2``: each row's Euclidean norm in the LP's scaled coordinates (one blocked pass)."""
-    out = np.empty(W.shape[0])
-    for s in range(0, W.shape[0], _CHUNK):
-        blk = W[s : s + _CHUNK] * d
-        out[s : s + _CHUNK] = np.sqrt(np.einsum("ij,ij->i", blk, blk))
-    return out
+    """(N,) ``||W_k diag(d)||_2``: each row's Euclidean norm in the LP's scaled coordinates (one pass)."""
+    return np.sqrt(np.einsum("ij,ij,j->i", W, W, d * d))  # no (N, p) temporary
 
 
 def _initial_rows(norms, m0, half, initial_rows):
@@ -164,64 +164,21 @@ def _worst(v, candidates, violation_tol, add_rows):
     return idx
 
 
-def _rows_term(bl, bu, y):
-    """``down(min(y bl, y bu))`` elementwise (0 where ``y = 0``): the row terms of the safe bound."""
-    return down(np.where(y > 0, y * np.where(y > 0, bl, 0.0), y * np.where(y < 0, bu, 0.0)))
-
-
-def _sum_down_cols(v, counts):
-    """Lower bounds of the exact column sums of ``v`` (m, k), column j holding at most ``counts[j]`` non-zero
-    terms (the zeros add exactly, so the error bound of a ``counts[j]``-term sum holds, any order)."""
-    s = np.sum(v, axis=0)
-    kn = np.array([_K(int(c)) for c in counts])
-    return down(s - up(up(kn * np.sum(np.abs(v), axis=0)) + TINY))
-
-
-def _K(n: int) -> float:
-    return 2.0 * (n + 2) * U  # the constant of ident.numerics.interval.dot_error for n terms
-
-
 def _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi):
     """The 2p safe bounds (LP j < p: lower of theta_j; LP p + j: upper) over the prior, then once more over the
     box they give (it encloses the set, so the bound stays valid and the residual costs only that box).
-
-    The Neumaier-Shcherbina bound of :class:`~ident.numerics.lp.SafeBound` around ``theta0`` for the 2p dual
-    vectors at once: the rows of all duals gathered once (their shifted bounds ``bl - W theta0``, rounded
-    outward, are the same for every LP), the residuals ``W^T y - c`` of the 2p LPs by one enclosed product,
-    each LP's dot products and sums bounded as sums of its own non-zero terms.
-    """
+    All 2p at once (:class:`~ident.numerics.lp.SafeBounds`: the rows of every LP's duals gathered once)."""
     p = prior_lo.size
-    n_lp = 2 * p
-    rows = np.unique(np.concatenate([r for r, _ in duals])) if duals else np.zeros(0, dtype=np.int64)
-    Y = np.zeros((rows.size, n_lp))
+    rows = np.unique(np.concatenate([r for r, _ in duals]))
+    Y = np.zeros((rows.size, 2 * p))
     for j, (r, yd) in enumerate(duals):
         Y[np.searchsorted(rows, r), j] = yd
-    Y[~np.isfinite(Y)] = 0.0  # any y is valid: a non-finite dual is dropped, as SafeBound does
-    counts = np.count_nonzero(Y, axis=0)
-    A = W[rows]
-    alo, ahi = point_matmul(A, theta0)
-    sbl, sbu = down(bl[rows] - ahi), up(bu[rows] - alo)  # the strips around theta0, rounded outward
-    row_terms = np.where(Y != 0.0, _rows_term(sbl[:, None], sbu[:, None], Y), 0.0)  # (rows, 2p), exact zeros
-    g = A.T @ Y  # (p, 2p): W^T y, enclosed with the error bound of each LP's own number of terms
-    e = up(up(np.array([_K(int(c)) for c in counts]) * (np.abs(A).T @ np.abs(Y))) + TINY)
-    none = counts == 0  # no row: the product is exactly zero
-    glo = np.where(none, 0.0, down(g - e))
-    ghi = np.where(none, 0.0, up(g + e))
-    rlo, rhi = sub(glo, ghi, costs.T, costs.T)  # (p, 2p) the residuals r = W^T y - c, enclosed
-    cx0 = sum_down(down(costs * theta0), axis=1)  # (2p,) c^T theta0, rounded down
-    n_terms = counts + p
-
-    def bounds_over(box_lo, box_hi):
-        zl, zu = down(box_lo - theta0), up(box_hi - theta0)
-        plo, _ = mul(-rhi, -rlo, zl[:, None], zu[:, None])  # min of -r z over the box, per LP (p, 2p)
-        mu = _sum_down_cols(np.vstack([row_terms, plo]), n_terms)
-        return down(mu + cx0)
-
+    bounds = SafeBounds(W[rows], bl[rows], bu[rows], costs, Y, theta0)
     lower, upper = prior_lo.copy(), prior_hi.copy()
     for refine in (False, True):
         if refine and np.any(lower > upper):
             break  # the set is proven empty: no box to refine over
-        mu = bounds_over(lower.copy(), upper.copy()) if refine else bounds_over(prior_lo, prior_hi)
+        mu = bounds.over(lower.copy(), upper.copy()) if refine else bounds.over(prior_lo, prior_hi)
         lower = np.maximum(lower, mu[:p])
         upper = np.minimum(upper, -mu[p:])
     return lower, upper
@@ -266,7 +223,7 @@ class _WorkingSet:
                 pool = {"radius": r, "rows": None}
             else:
                 pool = {"radius": r, "rows": rows, "W": self.W[rows], "m0": self.m0[rows], "half": self.half[rows],
-                        "inv": self.inv_unit[rows], "norms": self.norms[rows], "room": self.room[rows]}
+                        "inv": self.inv_unit[rows]}
             self._pool = pool
         return pool if pool["rows"] is not None else None
 
@@ -285,19 +242,20 @@ class _WorkingSet:
                 return None, rows
             if sol.status == "infeasible":
                 return sol, rows
-            radius = self._radius(sol.z[:, None])
-            pw = self._pool_for(radius)
-            if pw is None:  # far from the centre: every row is a candidate, one pass over W
-                cand = np.flatnonzero(~self.mask)
-                wz, m0, half, inv = _matvec(self.W, sol.z)[cand], self.m0[cand], self.half[cand], self.inv_unit[cand]
-            else:
-                sel = np.flatnonzero(pw["norms"] * radius > pw["room"])
-                sel = sel[~self.mask[pw["rows"][sel]]]
-                if not sel.size:
-                    return sol, rows
-                cand = pw["rows"][sel]
-                wz, m0, half, inv = pw["W"][sel] @ sol.z, pw["m0"][sel], pw["half"][sel], pw["inv"][sel]
-            new = _worst((np.abs(wz - m0) - half) * inv, cand, violation_tol, add_rows)
+            u = sol.z / self.d
+            pw = self._pool_for(float(np.sqrt(np.dot(u, u))) * self._MARGIN)
+            if pw is None:  # far from the centre: every row is a candidate, one pass over W; add more rows
+                v, m0, half, inv = _matvec(self.W, sol.z), self.m0, self.half, self.inv_unit
+                mask, cand, k = self.mask, np.arange(self.W.shape[0]), 3 * add_rows
+            else:  # the pool holds every row the solution may violate
+                v, m0, half, inv = pw["W"] @ sol.z, pw["m0"], pw["half"], pw["inv"]
+                mask, cand, k = self.mask[pw["rows"]], pw["rows"], add_rows
+            v -= m0  # in place: v = (|W z - m0| - half) / unit, the scaled violation
+            np.abs(v, out=v)
+            v -= half
+            v *= inv
+            v[mask] = -np.inf  # rows already in the model
+            new = _worst(v, cand, violation_tol, k)
             if new.size == 0:
                 return sol, rows
             self.add(new)
@@ -312,12 +270,9 @@ class _WorkingSet:
         if pw is None:
             rows, dev = _violated_rows(self.W, dx_cols, self.m0, thr, self.mask)
         else:
-            sel = np.flatnonzero(pw["norms"] * radius > pw["room"])
-            sel = sel[~self.mask[pw["rows"][sel]]]
-            cand = pw["rows"][sel]
-            dev = np.abs(pw["W"][sel] @ dx_cols - pw["m0"][sel, None])
-            hit = dev.max(axis=1) > thr[cand] if cand.size else np.zeros(0, dtype=bool)
-            rows, dev = cand[hit], dev[hit]
+            dev = np.abs(pw["W"] @ dx_cols - pw["m0"][:, None])
+            hit = (dev.max(axis=1) > thr[pw["rows"]]) & ~self.mask[pw["rows"]]
+            rows, dev = pw["rows"][hit], dev[hit]
         if not rows.size:
             return [rows] * dx_cols.shape[1]
         v = (dev - self.half[rows, None]) * self.inv_unit[rows, None]
@@ -386,7 +341,8 @@ def interval_hull(
     m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
     d = column_scale(W, power2_scale(size))
     norms = _row_norms(W, d)
-    first = np.union1d(_initial_rows(norms, m0, half, initial_rows), _spread_rows(n_rows, 2 * p))
+    k = n_rows if n_rows <= ALL_ROWS_UP_TO else initial_rows
+    first = np.union1d(_initial_rows(norms, m0, half, k), _spread_rows(n_rows, 2 * p))
     n_lp = 2 * p
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
