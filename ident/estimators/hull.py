@@ -140,17 +140,11 @@ def _row_norms(W, d):
     return np.sqrt(np.einsum("ij,ij,j->i", W, W, d * d))  # no (N, p) temporary
 
 
-def _initial_rows(norms, m0, half, initial_rows):
-    """The ``initial_rows`` rows nearest to the centre: the distance of the centre to the strip boundary,
-    ``(half_k - |m0_k|) / norms_k``, in the LP's scaled coordinates (all rows when there are fewer)."""
-    n_rows = m0.size
-    k = min(n_rows, initial_rows)
-    if 0 < k < n_rows:
-        dist = (half - np.abs(m0)) / (norms + 1e-300)
-        near = np.argpartition(dist, k - 1)[:k]
-    else:
-        near = np.arange(k)
-    return near
+def _near_rows(rho, pool_rows):
+    """The ``pool_rows`` rows of smallest critical radius ``rho`` (all rows when there are fewer), sorted by it."""
+    n_rows = rho.size
+    near = np.argpartition(rho, pool_rows - 1)[:pool_rows] if pool_rows < n_rows else np.arange(n_rows)
+    return near[np.argsort(rho[near], kind="stable")]
 
 
 def _worst(v, candidates, violation_tol, add_rows):
@@ -188,52 +182,48 @@ class _WorkingSet:
     """The rows of one hull model under constraint generation: the strips in the model's shifted coordinates
     (centres ``m0``, half-widths ``half``), the rows added so far (``idx``, in the model's order).
 
-    Violation checks visit only the rows a point could violate: ``|W_k z| <= norms_k ||z / d||`` (Cauchy-Schwarz
-    in the LP's scaled coordinates, ``norms`` from :func:`_row_norms`), so a row whose strip has more room
-    ``half_k + tol unit_k - |m0_k|`` than ``norms_k ||z / d||`` cannot be violated by ``z``; the others are
-    checked exactly (float: the checks steer the LPs, the safe bounds make the endpoints rigorous)."""
+    A row can be violated by a point ``z`` only if ``||z / d||`` exceeds its critical radius
+    ``rho_k = (half_k + tol unit_k - |m0_k|) / ||W_k diag(d)||`` (Cauchy-Schwarz in the LP's scaled coordinates:
+    ``|W_k z| <= ||W_k diag(d)|| ||z / d||``). The ``pool_rows`` rows of smallest ``rho`` are gathered once,
+    sorted by ``rho``: the rows a solution may violate are a prefix of them, checked exactly; a solution farther
+    out than the pool's last ``rho`` is checked on the whole pool (steering only), and the final check of all
+    solutions then makes one pass over ``W`` (float: the checks steer the LPs, the safe bounds make the
+    endpoints rigorous)."""
 
     _MARGIN = 1.0 + 1e-9  # on the Cauchy-Schwarz bound, for the rounding of the norms
 
-    def __init__(self, W, m0, half, unit, size, norms, d, violation_tol, model: LPModel) -> None:
-        self.W, self.m0, self.half, self.unit, self.size = W, m0, half, unit, size
+    def __init__(self, W, m0, half, unit, size, d, near, rho_near, model: LPModel) -> None:
+        self.W, self.m0, self.half, self.unit, self.size, self.d = W, m0, half, unit, size, d
         self.inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
-        self.norms, self.d = norms, d
-        self.room = half + violation_tol * unit - np.abs(m0)
         self.mask = np.zeros(W.shape[0], dtype=bool)
         self.idx = np.zeros(0, dtype=np.int64)
         self.model = model
-        self._pool: dict | None = None
+        self.near, self.rho = near, rho_near
+        self.all_near = near.size == W.shape[0]  # the pool is every row: every check is complete
+        self.nW, self.nm0, self.nhalf, self.ninv = W[near], m0[near], half[near], self.inv_unit[near]
+        self.nmask = np.zeros(near.size, dtype=bool)  # pool rows already in the model
+        self.pos = np.full(W.shape[0], -1, dtype=np.int64)
+        self.pos[near] = np.arange(near.size)
 
     def add(self, rows) -> None:
         self.model.add_shifted_rows(self.W[rows], self.m0[rows] - self.half[rows], self.m0[rows] + self.half[rows],
                                     self.size[rows])
         self.mask[rows] = True
+        at = self.pos[rows]
+        self.nmask[at[at >= 0]] = True
         self.idx = np.concatenate([self.idx, rows])
 
-    def _pool_for(self, radius: float) -> dict | None:
-        """The rows that a point within ``radius`` (scaled) of the centre may violate, gathered; None when they are
-        more than a quarter of all rows (then the check is a pass over ``W``). Re-made when the radius grows past
-        the pool's or falls below half of it; the pool's radius is 1.25 times the asked one."""
-        pool = self._pool
-        if pool is None or radius > pool["radius"] or 2.0 * radius < pool["radius"]:
-            r = 1.25 * radius
-            rows = np.flatnonzero(self.norms * r > self.room)
-            if 4 * rows.size > self.W.shape[0]:
-                pool = {"radius": r, "rows": None}
-            else:
-                pool = {"radius": r, "rows": rows, "W": self.W[rows], "m0": self.m0[rows], "half": self.half[rows],
-                        "inv": self.inv_unit[rows]}
-            self._pool = pool
-        return pool if pool["rows"] is not None else None
-
-    def _radius(self, dz_cols) -> float:
-        return float(np.max(np.sqrt(np.sum((dz_cols / self.d[:, None]) ** 2, axis=0)))) * self._MARGIN
+    def _prefix(self, dz_cols) -> tuple[int, bool]:
+        """How many pool rows the shifted points ``dz_cols`` (p, k) may violate, and whether no other row can."""
+        u = dz_cols / self.d[:, None]
+        radius = float(np.sqrt(np.max(np.einsum("ij,ij->j", u, u)))) * self._MARGIN
+        cnt = int(np.searchsorted(self.rho, radius, side="right"))
+        return cnt, self.all_near or cnt < self.rho.size
 
     def solve(self, cost, max_rounds, violation_tol, add_rows):
-        """Solve ``min cost^T theta`` on the working set, adding the worst violated rows (of all N) and re-solving
-        until none is violated. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the
-        duals' rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
+        """Solve ``min cost^T theta`` on the working set, adding the worst violated pool rows and re-solving until
+        none is violated. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the duals'
+        rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
         sol, rows = None, self.idx
         for _ in range(max_rounds):
             try:
@@ -242,37 +232,33 @@ class _WorkingSet:
                 return None, rows
             if sol.status == "infeasible":
                 return sol, rows
-            u = sol.z / self.d
-            pw = self._pool_for(float(np.sqrt(np.dot(u, u))) * self._MARGIN)
-            if pw is None:  # far from the centre: every row is a candidate, one pass over W; add more rows
-                v, m0, half, inv = _matvec(self.W, sol.z), self.m0, self.half, self.inv_unit
-                mask, cand, k = self.mask, np.arange(self.W.shape[0]), 3 * add_rows
-            else:  # the pool holds every row the solution may violate
-                v, m0, half, inv = pw["W"] @ sol.z, pw["m0"], pw["half"], pw["inv"]
-                mask, cand, k = self.mask[pw["rows"]], pw["rows"], add_rows
-            v -= m0  # in place: v = (|W z - m0| - half) / unit, the scaled violation
+            cnt, complete = self._prefix(sol.z[:, None])
+            if cnt == 0:
+                return sol, rows
+            v = self.nW[:cnt] @ sol.z  # in place: v = (|W z - m0| - half) / unit, the scaled violation
+            v -= self.nm0[:cnt]
             np.abs(v, out=v)
-            v -= half
-            v *= inv
-            v[mask] = -np.inf  # rows already in the model
-            new = _worst(v, cand, violation_tol, k)
+            v -= self.nhalf[:cnt]
+            v *= self.ninv[:cnt]
+            v[self.nmask[:cnt]] = -np.inf  # rows already in the model
+            new = _worst(v, self.near[:cnt], violation_tol, add_rows if complete else 3 * add_rows)
             if new.size == 0:
                 return sol, rows
             self.add(new)
         return sol, rows
 
     def full_check(self, dx_cols, violation_tol, add_rows) -> list:
-        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (the candidates exactly, the others
-        by the bound); add the worst violated rows of each to the model. Returns, per column, the rows added."""
-        thr = self.half + violation_tol * self.unit
-        radius = self._radius(dx_cols)
-        pw = self._pool_for(radius)
-        if pw is None:
-            rows, dev = _violated_rows(self.W, dx_cols, self.m0, thr, self.mask)
+        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (a prefix of the pool when that is
+        complete, else one blocked pass over ``W``); add the worst violated rows of each to the model. Returns,
+        per column, the rows added."""
+        cnt, complete = self._prefix(dx_cols)
+        if complete:
+            dev = np.abs(self.nW[:cnt] @ dx_cols - self.nm0[:cnt, None])
+            rows = self.near[:cnt]
+            hit = (dev.max(axis=1) > self.nhalf[:cnt] + violation_tol * self.unit[rows]) & ~self.nmask[:cnt]
+            rows, dev = rows[hit], dev[hit]
         else:
-            dev = np.abs(pw["W"] @ dx_cols - pw["m0"][:, None])
-            hit = (dev.max(axis=1) > thr[pw["rows"]]) & ~self.mask[pw["rows"]]
-            rows, dev = pw["rows"][hit], dev[hit]
+            rows, dev = _violated_rows(self.W, dx_cols, self.m0, self.half + violation_tol * self.unit, self.mask)
         if not rows.size:
             return [rows] * dx_cols.shape[1]
         v = (dev - self.half[rows, None]) * self.inv_unit[rows, None]
@@ -293,6 +279,7 @@ def interval_hull(
     row_scale: np.ndarray | None = None,
     center: np.ndarray | None = None,
     initial_rows: int = 60,
+    pool_rows: int = 4000,
     add_rows: int = 20,
     violation_tol: float = 1e-10,
     lp_tol: float = 1e-9,
@@ -340,9 +327,10 @@ def interval_hull(
     theta0 = np.clip(np.where(np.isfinite(theta0), theta0, 0.5 * (prior_lo + prior_hi)), prior_lo, prior_hi)
     m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
     d = column_scale(W, power2_scale(size))
-    norms = _row_norms(W, d)
-    k = n_rows if n_rows <= ALL_ROWS_UP_TO else initial_rows
-    first = np.union1d(_initial_rows(norms, m0, half, k), _spread_rows(n_rows, 2 * p))
+    rho = (half + violation_tol * unit - np.abs(m0)) / (_row_norms(W, d) + 1e-300)  # critical radii
+    near = _near_rows(rho, max(pool_rows, initial_rows))
+    first = np.arange(n_rows) if n_rows <= ALL_ROWS_UP_TO else np.union1d(near[:initial_rows],
+                                                                         _spread_rows(n_rows, 2 * p))
     n_lp = 2 * p
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
@@ -355,7 +343,7 @@ def interval_hull(
     todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
         model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=d, tolerance=lp_tol, **PRIMAL_SIMPLEX)
-        ws = _WorkingSet(W, m0, half, unit, size, norms, d, violation_tol, model)
+        ws = _WorkingSet(W, m0, half, unit, size, d, near, rho[near], model)
         ws.add(first)
         while todo and rounds < max_rounds and not infeasible:
             rounds += 1
