@@ -1,7 +1,8 @@
 """Cost of every registered estimator, as ratios to numpy.linalg.lstsq on the same data in the same run.
 
     python benchmarks/bench_estimators.py [--sizes 4000 40000 400000] [--repeats 5] [--threads 1] [--cap 30]
-                                          [--data h4|gauss] [--methods all|a,b] [--campaign-runs 2] [--json]
+                                          [--data h4|gauss] [--methods all|a,b] [--campaign-runs 2] [--big N]
+                                          [--json]
     python benchmarks/bench_estimators.py --quick      (sizes 4000 40000, 3 repeats, no campaign)
 
 BLAS threads: pinned to ``--threads`` (default 1) through OPENBLAS_NUM_THREADS, OMP_NUM_THREADS and
@@ -23,7 +24,8 @@ median lstsq time; the box's mean width and whether it encloses the truth; also 
 size, or whose time extrapolated linearly from the previous size, exceeds ``--cap`` seconds is skipped at
 that size and above (and said so). Then the campaign throughput: runs of the ``enclosure`` campaign
 (``--quick`` spec: 3 s trajectories; the job function timed directly) with each built-in method alone and
-with all of them, runs per minute (the run's simulation and processing included).
+with all of them, runs per minute (the run's simulation and processing included). ``--big N``: the hull
+alone at N rows, its time and peak traced memory relative to W.
 Target: the exact hull at N = 40 000 at most 3x lstsq.
 """
 
@@ -41,6 +43,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
+import tracemalloc  # noqa: E402
 
 import _setup  # noqa: E402,F401  (repository root on sys.path)
 import numpy as np  # noqa: E402
@@ -155,6 +158,20 @@ def bench_size(n: int, data: str, estimators, repeats: int, cap: float, skipped:
     return row
 
 
+def bench_big(n: int, data: str) -> dict:
+    """The hull alone at ``n`` rows: time against lstsq, peak traced memory relative to ``W.nbytes``."""
+    W, y, theta, (lo, hi), _ = (h4_data if data == "h4" else gauss_data)(n, seed=1)
+    t_lstsq = statistics.median(_timed(lambda: np.linalg.lstsq(W, y, rcond=None))[0] for _ in range(3))
+    tracemalloc.start()
+    seconds, box = _timed(lambda: ident.estimate(W, y, 1.0, (lo, hi), method="hull"))
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return {"N": W.shape[0], "hull_s": seconds, "lstsq_s": t_lstsq, "hull_ratio": seconds / t_lstsq,
+            "peak_over_W": peak / W.nbytes, "W_MB": W.nbytes / 2**20, "working_rows": box.info["working_rows"],
+            "lp_iterations": box.info["lp_iterations"],
+            "encloses": bool(np.all((box.lower <= theta) & (theta <= box.upper)))}
+
+
 def bench_campaign(runs: int, names) -> dict:
     """Runs per minute of the ``enclosure`` campaign (``--quick`` spec) with each method alone and all together
     (all those that ran alone: a method the campaign cannot feed, e.g. one that needs instruments, is reported)."""
@@ -198,6 +215,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cap", type=float, default=30.0, help="seconds: a method slower than this at a size is skipped")
     ap.add_argument("--data", choices=("h4", "gauss"), default="h4")
     ap.add_argument("--campaign-runs", type=int, default=2, help="runs of the enclosure campaign per method (0: none)")
+    ap.add_argument("--big", type=int, default=0, help="rows of a hull-only run with peak memory (0: none)")
     ap.add_argument("--methods", default="all", help="comma-separated estimator names (default all registered)")
     ap.add_argument("--quick", action="store_true", help="sizes 4000 40000, 3 repeats, no campaign")
     ap.add_argument("--json", action="store_true", help="print the results as JSON instead of tables")
@@ -218,9 +236,11 @@ def main(argv=None) -> int:
     rows = [bench_size(n, args.data, estimators, args.repeats, args.cap, skipped, last) for n in args.sizes]
     builtin = [e.name for e in estimators if e.origin == "built-in"]
     campaign = bench_campaign(args.campaign_runs, builtin) if args.campaign_runs and builtin else None
+    big = bench_big(args.big, args.data) if args.big else None
     load_after = os.getloadavg()[0]
-    result = {"data": args.data, "threads": args.threads, "blas": _blas(), "repeats": args.repeats, "cap_s": args.cap,
-              "sizes": rows, "skipped": skipped, "broken": [list(b) for b in found.broken], "campaign": campaign,
+    result = {"big": big, "data": args.data, "threads": args.threads, "blas": _blas(), "repeats": args.repeats,
+              "cap_s": args.cap, "sizes": rows, "skipped": skipped, "broken": [list(b) for b in found.broken],
+              "campaign": campaign,
               "load_average": [load_before, load_after]}
     if args.json:
         print(json.dumps(result, indent=2))
@@ -261,6 +281,11 @@ def main(argv=None) -> int:
         lps = forty[0]["methods"].get(HULL_LPS, {}).get("ratio", float("nan"))
         print(f"target: hull at N = 40 000 at most 3x lstsq: ident.estimate {ratio:.2f}x "
               f"({'met' if ratio <= 3 else 'MISSED'}), its LPs alone {lps:.2f}x")
+    if big:
+        print(f"hull at N = {big['N']}: {big['hull_s']:.2f} s ({big['hull_ratio']:.2f}x lstsq = "
+              f"{big['lstsq_s']:.2f} s), "
+              f"peak traced memory {big['peak_over_W']:.2f}x W ({big['W_MB']:.0f} MB), {big['working_rows']} working "
+              f"rows, {big['lp_iterations']} LP iterations, encloses truth: {big['encloses']}")
     if campaign:
         print(f"campaign throughput (enclosure --quick, {args.campaign_runs} runs each, simulation included):")
         for label, c in campaign.items():

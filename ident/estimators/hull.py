@@ -332,6 +332,7 @@ def interval_hull(
     m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
     d = column_scale(W, power2_scale(size))
     rho = (half + violation_tol * unit - np.abs(m0)) / (_row_norms(W, d) + 1e-300)  # critical radii
+    initial_rows, add_rows = max(initial_rows, 4 * p), max(add_rows, p)  # many parameters: more rows at once
     near = _near_rows(rho, max(pool_rows, initial_rows))
     first = np.arange(n_rows) if n_rows <= ALL_ROWS_UP_TO else np.union1d(near[:initial_rows],
                                                                          _spread_rows(n_rows, 2 * p))
