@@ -48,7 +48,6 @@ from ident.numerics.interval import down, mid_rad, point_matmul, up
 from ident.numerics.lp import (
     LPError,
     LPModel,
-    check,
     SafeBound,
     SafeBounds,
     column_scale,
@@ -226,11 +225,8 @@ class _WorkingSet:
         none is violated. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the duals'
         rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
         sol, rows = None, self.idx
-        for k in range(max_rounds):
+        for _ in range(max_rounds):
             try:
-                # a new cost keeps the last optimal basis primal feasible (primal simplex); rows just added keep
-                # it dual feasible (dual simplex: 10 % fewer iterations in all on Gaussian rows, as many on H4 rows)
-                check(self.model.highs.setOptionValue("simplex_strategy", 1 if k else 4), "option simplex_strategy")
                 sol, rows = self.model.solve(cost), self.idx
             except LPError:
                 return None, rows
