@@ -1,173 +1,300 @@
-"""Speed and tightness of the estimators, as ratios to numpy.linalg.lstsq on the same data in the same run.
+"""Cost of every registered estimator, as ratios to numpy.linalg.lstsq on the same data in the same run.
 
-    python benchmarks/bench_estimators.py [--sizes 4000 40000 400000] [--big 1000000] [--repeats 3] [--threads 1]
-    python benchmarks/bench_estimators.py --quick      (sizes 4000 40000, no big run)
+    python benchmarks/bench_estimators.py [--sizes 4000 40000 400000] [--repeats 5] [--threads 1] [--cap 30]
+                                          [--data h4|gauss] [--methods all|a,b] [--campaign-runs 2] [--big N]
+                                          [--json]
+    python benchmarks/bench_estimators.py --quick      (sizes 4000 40000, 3 repeats, no campaign)
 
-Synthetic, well-conditioned data: W (N, 14) standard normal, theta_true uniform in [0.5, 1.5], noise uniform
-in [-1, 1], bound 1, prior [0, 2]^14. For each N: the median time of each method over ``--repeats`` runs
-divided by the median time of ``numpy.linalg.lstsq(W, y)``; the mean widths of the cgsp and hull boxes and
-their ratio. Then the hull alone at ``--big`` rows (time, and peak traced memory relative to ``W.nbytes``).
-Then, at the first size, the hull in other units (rows times 1e9, parameter j in units 10^-c_j with c_j from -6
-to 6) and at a bound of 1e-12 relative (data with noise of that size): time against the SI run and the largest
-endpoint difference in widths of the SI box (converted back; the stated tolerance is 1e-6 width plus the
-rounding of the converted data, tests/ident/test_units.py).
-Targets: hull within 10x of lstsq at N = 40 000; hull at 10^6 rows under 10 s with peak memory under 3x W.
+BLAS threads: pinned to ``--threads`` (default 1) through OPENBLAS_NUM_THREADS, OMP_NUM_THREADS and
+MKL_NUM_THREADS before numpy loads; printed with the run. On a shared 2-core machine a multi-threaded BLAS
+competing with other processes makes the timings (and the hull's blocked passes over W) erratic, so the
+default is one thread for every method and for lstsq alike.
+
+Data (``--data h4``, the default): the H4 regressor (paper eqs. 14-18, :func:`ident.regressor`) on a smooth
+multi-sine nacelle motion in the workspace (five harmonics per axis, 1 kHz samples, N / 4 samples), the
+truth the nominal parameters, torque errors uniform in [-1, 1] N m, bound 1 N m, prior [0, 3 x nominal].
+``--data gauss``: W (N, 14) standard normal, truth uniform in [0.5, 1.5], errors uniform in [-1, 1], bound 1,
+prior [0, 2]^14. Rows carry their joint (``groups``, row 4k + i -> i) and the noise-free regressor is the
+instrument matrix (``instruments``), so every method receives its context.
+
+For each N: every estimator of :func:`ident.estimators.registry.available` and lstsq, interleaved repeats
+(so that all see the same machine load), median time of each over ``--repeats`` runs and its ratio to the
+median lstsq time; the box's mean width and whether it encloses the truth; also the hull's 2p LPs alone
+(``interval_hull`` from the least-squares centre, row "hull LPs"). A method whose first run at a
+size, or whose time extrapolated linearly from the previous size, exceeds ``--cap`` seconds is skipped at
+that size and above (and said so). Then the campaign throughput: runs of the ``enclosure`` campaign
+(``--quick`` spec: 3 s trajectories; the job function timed directly) with each built-in method alone and
+with all of them, runs per minute (the run's simulation and processing included). ``--big N``: the hull
+alone at N rows, its time and peak traced memory relative to W.
+Target: the exact hull at N = 40 000 at most 3x lstsq.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import statistics
-import time
-import tracemalloc
+import sys
 
-import _setup  # noqa: F401  (BLAS threads, repository root; before numpy)
+if __name__ == "__main__":  # BLAS threads: fixed before numpy is imported (default one thread)
+    _threads = sys.argv[sys.argv.index("--threads") + 1] if "--threads" in sys.argv else "1"
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[_var] = _threads
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import time  # noqa: E402
+import tracemalloc  # noqa: E402
+
+import _setup  # noqa: E402,F401  (repository root on sys.path)
 import numpy as np  # noqa: E402
 
 import ident  # noqa: E402
+from ident.estimators import registry  # noqa: E402
+from ident.estimators.estimate import least_squares_center  # noqa: E402
+from ident.estimators.hull import interval_hull, strip_bounds  # noqa: E402
 
 P = 14
+HULL_LPS = "hull LPs"  # the row of interval_hull alone: the 2p LPs from the least-squares centre
 
 
-def make_data(n: int, seed: int = 0):
+def h4_data(n_rows: int, seed: int = 0):
+    """The H4 equation on a multi-sine motion: ``(W, y, truth, prior, instruments)`` with ``n_rows // 4`` samples."""
+    import sim
+    from ident.robots.h4 import NOMINAL_PARAMETERS
+    from trajectories.fourier import joint_motion
+
+    geometry = sim.H4Geometry.from_model(sim.load_model())
+    n = n_rows // 4
+    t = np.arange(n) * 1e-3
+    rng = np.random.default_rng(seed)
+    amp = np.array([0.06, 0.06, 0.08, 0.25])  # [m, m, m, rad]: within the H4's workspace around home
+    x = np.tile(geometry.x_home, (n, 1))
+    xd, xdd = np.zeros((n, 4)), np.zeros((n, 4))
+    for k in range(1, 6):
+        w = 2 * np.pi * 0.2 * k * (1 + 0.1 * np.arange(4))
+        phase = rng.uniform(0, 2 * np.pi, 4)
+        a = amp / k / 2
+        s, c = np.sin(w * t[:, None] + phase), np.cos(w * t[:, None] + phase)
+        x, xd, xdd = x + a * s, xd + a * w * c, xdd - a * w**2 * s
+    m = joint_motion(geometry, x, xd, xdd)
+    W = ident.regressor(geometry, m["q"], m["qd"], m["qdd"])
+    theta = np.array(NOMINAL_PARAMETERS)
+    y = W @ theta + rng.uniform(-1.0, 1.0, W.shape[0])
+    return W, y, theta, (np.zeros(P), 3.0 * theta), W
+
+
+def gauss_data(n: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     W = rng.standard_normal((n, P))
     theta = rng.uniform(0.5, 1.5, P)
     y = W @ theta + rng.uniform(-1.0, 1.0, n)
-    return W, y, theta
+    return W, y, theta, (np.zeros(P), 2.0 * np.ones(P)), W
 
 
-def median_time(fn, repeats: int) -> tuple[float, object]:
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), out
+def _timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t0, out
 
 
-def bench_size(n: int, repeats: int) -> dict:
-    """Interleaved repeats (lstsq, hull, cgsp, wls, lstsq, ...) so that all see the same machine load."""
-    W, y, theta = make_data(n)
-    prior = (np.zeros(P), 2.0 * np.ones(P))
-    runs = {
-        "lstsq": lambda: np.linalg.lstsq(W, y, rcond=None),
-        "hull": lambda: ident.estimate(W, y, 1.0, prior, method="hull"),
-        "cgsp": lambda: ident.estimate(W, y, 1.0, prior, method="cgsp"),
-        "wls": lambda: ident.wls(W, y, joints=2),
-    }
+def bench_size(n: int, data: str, estimators, repeats: int, cap: float, skipped: dict, last: dict) -> dict:
+    """One size: lstsq and every estimator not skipped, interleaved repeats; medians, ratios, widths."""
+    W, y, theta, (lo, hi), Z = (h4_data if data == "h4" else gauss_data)(n)
+    prior = ident.Box(lo, hi, tuple(f"theta{j + 1}" for j in range(P)))
+    groups = np.arange(W.shape[0]) % 4
+    n = W.shape[0]
+    runs = {"lstsq": lambda: np.linalg.lstsq(W, y, rcond=None)}
+    if HULL_LPS not in skipped and any(e.name == "hull" for e in estimators):  # the 2p LPs alone (no checks)
+        bl, bu = strip_bounds(y, np.ones(n))
+        center = least_squares_center(W.T @ W, W, y, lo, hi)
+        runs[HULL_LPS] = lambda: interval_hull(W, bl, bu, lo, hi, scale=np.ones(n), center=center)
+    for est in estimators:
+        if est.name in skipped:
+            continue
+        if est.name in last and last[est.name][1] * n / last[est.name][0] > cap:
+            skipped[est.name] = f"skipped from N = {n}: {last[est.name][1]:.1f} s at N = {last[est.name][0]}, " \
+                                f"extrapolated {last[est.name][1] * n / last[est.name][0]:.0f} s > cap {cap:g} s"
+            continue
+        runs[est.name] = (lambda e=est: registry.call(e, W, y, 1.0, prior, groups=groups, instruments=Z))
     times = {k: [] for k in runs}
-    out = {}
-    runs["lstsq"]()  # warm-up (BLAS threads, first-touch pages)
-    for _ in range(repeats):
-        for name, fn in runs.items():
-            t, out[name] = median_time(fn, 1)
+    out, errors = {}, {}
+    runs["lstsq"]()  # warm-up (first-touch pages, BLAS initialisation)
+    for r in range(repeats):
+        for name, fn in list(runs.items()):
+            if name in errors:
+                continue
+            try:
+                t, out[name] = _timed(fn)
+            except Exception as exc:  # a method that fails is reported, never costs the others
+                errors[name] = f"{type(exc).__name__}: {exc}"
+                continue
             times[name].append(t)
+            if r == 0 and name != "lstsq" and t > cap:
+                skipped[name] = f"skipped after one run at N = {n}: {t:.1f} s > cap {cap:g} s"
+                runs.pop(name)
     t_lstsq = statistics.median(times["lstsq"])
-    row = {"N": n, "lstsq_s": t_lstsq}
-    for name in ("hull", "cgsp", "wls"):
-        row[f"{name}_s"] = statistics.median(times[name])
-        row[f"{name}_ratio"] = row[f"{name}_s"] / t_lstsq
-    for method in ("hull", "cgsp"):
-        row[f"{method}_width"] = float(out[method].width.mean())
-        row[f"{method}_encloses"] = bool(out[method].contains(theta).all())
-    row["width_ratio_cgsp_over_hull"] = row["cgsp_width"] / row["hull_width"]
+    row = {"N": n, "lstsq_s": t_lstsq, "methods": {}}
+    for name in runs:
+        if name == "lstsq":
+            continue
+        if name in errors:
+            row["methods"][name] = {"error": errors[name]}
+            continue
+        box = out[name]
+        med = statistics.median(times[name])
+        if name == HULL_LPS:  # a HullResult, not a Box
+            row["methods"][name] = {"seconds": med, "ratio": med / t_lstsq, "runs": len(times[name]),
+                                    "mean_width": float(np.mean(box.upper - box.lower)),
+                                    "encloses": bool(np.all((box.lower <= theta) & (theta <= box.upper))),
+                                    "lp_iterations": box.info["lp_iterations"], "lp_solves": box.info["lp_solves"]}
+            continue
+        last[name] = (n, med)
+        row["methods"][name] = {"seconds": med, "ratio": med / t_lstsq, "runs": len(times[name]),
+                                "mean_width": float(np.mean(box.upper - box.lower)),
+                                "encloses": bool(np.all((box.lower <= theta) & (theta <= box.upper)))}
+    for name, m in row["methods"].items():
+        if "mean_width" in m and "hull" in row["methods"] and "mean_width" in row["methods"]["hull"]:
+            m["width_vs_hull"] = m["mean_width"] / row["methods"]["hull"]["mean_width"]
     return row
 
 
-def bench_units(n: int, repeats: int) -> dict:
-    """The hull in SI units, in other units, and at a tight bound; times and endpoint differences."""
-    W, y, theta = make_data(n)
-    prior = (np.zeros(P), 2.0 * np.ones(P))
-    c = 10.0 ** np.round(np.linspace(-6, 6, P))
-    f = 1e9
-    t_si, box = median_time(lambda: ident.estimate(W, y, 1.0, prior), repeats)
-    Wu, yu, pu = W * f / c, y * f, (prior[0] * c, prior[1] * c)
-    t_units, box_u = median_time(lambda: ident.estimate(Wu, yu, f, pu), repeats)
-    rng = np.random.default_rng(2)
-    rel = 1e-12
-    b = rel * float(np.abs(W @ theta).max())
-    yt = W @ theta + rng.uniform(-1.0, 1.0, n) * b
-    t_tight, box_t = median_time(lambda: ident.estimate(W, yt, b, prior), repeats)
-    w = box.upper - box.lower
-    diff = np.maximum(np.abs(box_u.lower / c - box.lower), np.abs(box_u.upper / c - box.upper))
-    return {"N": n, "si_s": t_si, "units_s": t_units, "units_ratio": t_units / t_si,
-            "units_max_diff_over_width": float(np.max(diff / w)), "tight_s": t_tight, "tight_ratio": t_tight / t_si,
-            "tight_width_over_bound": float(np.mean(box_t.upper - box_t.lower) / b),
-            "tight_encloses": bool(box_t.contains(theta).all())}
-
-
-def bench_big(n: int) -> dict:
-    W, y, theta = make_data(n, seed=1)
-    prior = (np.zeros(P), 2.0 * np.ones(P))
-    t_lstsq, _ = median_time(lambda: np.linalg.lstsq(W, y, rcond=None), 3)
+def bench_big(n: int, data: str) -> dict:
+    """The hull alone at ``n`` rows: time against lstsq, peak traced memory relative to ``W.nbytes``."""
+    W, y, theta, (lo, hi), _ = (h4_data if data == "h4" else gauss_data)(n, seed=1)
+    t_lstsq = statistics.median(_timed(lambda: np.linalg.lstsq(W, y, rcond=None))[0] for _ in range(3))
     tracemalloc.start()
-    t0 = time.perf_counter()
-    box = ident.estimate(W, y, 1.0, prior, method="hull")
-    seconds = time.perf_counter() - t0
+    seconds, box = _timed(lambda: ident.estimate(W, y, 1.0, (lo, hi), method="hull"))
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    return {
-        "N": n,
-        "hull_s": seconds,
-        "lstsq_s": t_lstsq,
-        "hull_ratio": seconds / t_lstsq,
-        "peak_over_W": peak / W.nbytes,
-        "W_MB": W.nbytes / 2**20,
-        "hull_width": float(box.width.mean()),
-        "hull_encloses": bool(box.contains(theta).all()),
-        "working_rows": box.info["working_rows"],
-        "lp_iterations": box.info["lp_iterations"],
-    }
+    return {"N": W.shape[0], "hull_s": seconds, "lstsq_s": t_lstsq, "hull_ratio": seconds / t_lstsq,
+            "peak_over_W": peak / W.nbytes, "W_MB": W.nbytes / 2**20, "working_rows": box.info["working_rows"],
+            "lp_iterations": box.info["lp_iterations"],
+            "encloses": bool(np.all((box.lower <= theta) & (theta <= box.upper)))}
+
+
+def bench_campaign(runs: int, names) -> dict:
+    """Runs per minute of the ``enclosure`` campaign (``--quick`` spec) with each method alone and all together
+    (all those that ran alone: a method the campaign cannot feed, e.g. one that needs instruments, is reported)."""
+    from scenarios.kinds.enclosure import campaign_job
+    from scenarios.registry import load_spec
+
+    spec = load_spec("enclosure", quick=True)
+    campaign_job({**spec, "estimators": {**spec["estimators"], "methods": ["hull"]}}, 0, spec["seed"])  # designs cached
+    out = {}
+    for label in list(names) + ["all"]:
+        methods = [label] if label != "all" else [m for m in names if "error" not in out[m]]  # all that ran alone
+        s = {**spec, "estimators": {**spec["estimators"], "methods": methods}}
+        total, per_method = 0.0, {}
+        try:
+            for i in range(runs):
+                t, res = _timed(lambda: campaign_job(s, i, spec["seed"]))
+                total += t
+                for k, v in res["methods"].items():
+                    per_method.setdefault(k, []).append(v.get("seconds") or 0.0)
+        except Exception as exc:
+            out[label] = {"error": f"{type(exc).__name__}: {exc}"}
+            continue
+        out[label] = {"runs_per_minute": 60.0 * runs / total, "seconds_per_run": total / runs,
+                      "method_seconds": {k: statistics.median(v) for k, v in per_method.items()}}
+    return out
+
+
+def _blas() -> str:
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return f"threads {os.environ.get('OPENBLAS_NUM_THREADS', '?')} (environment; threadpoolctl not installed)"
+    info = [f"{d.get('internal_api')} {d.get('num_threads')} thread(s)" for d in threadpool_info()]
+    return ", ".join(info) or "no BLAS found by threadpoolctl"
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[4000, 40000, 400000])
-    ap.add_argument("--big", type=int, default=1_000_000, help="rows for the hull-only run (0 to skip)")
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--quick", action="store_true", help="sizes 4000 40000 and no big run")
-    ap.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
-    ap.add_argument("--threads", type=int, default=None,
-                    help="BLAS threads (default: the library's own choice); 1 gives steadier timings on a busy machine")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--cap", type=float, default=30.0, help="seconds: a method slower than this at a size is skipped")
+    ap.add_argument("--data", choices=("h4", "gauss"), default="h4")
+    ap.add_argument("--campaign-runs", type=int, default=2, help="runs of the enclosure campaign per method (0: none)")
+    ap.add_argument("--big", type=int, default=0, help="rows of a hull-only run with peak memory (0: none)")
+    ap.add_argument("--methods", default="all", help="comma-separated estimator names (default all registered)")
+    ap.add_argument("--quick", action="store_true", help="sizes 4000 40000, 3 repeats, no campaign")
+    ap.add_argument("--json", action="store_true", help="print the results as JSON instead of tables")
+    ap.add_argument("--threads", type=int, default=1, help="BLAS threads (default 1; set before numpy loads)")
     args = ap.parse_args(argv)
-
     if args.quick:
-        args.sizes, args.big = [4000, 40000], 0
+        args.sizes, args.repeats, args.campaign_runs = [4000, 40000], 3, 0
+
+    found = registry.available()
+    estimators = list(found.estimators)
+    if args.methods != "all":
+        wanted = args.methods.split(",")
+        known = {e.name for e in estimators}
+        estimators = [e for e in estimators if e.name in wanted] + [registry.get(m) for m in wanted if m not in known]
     load_before = os.getloadavg()[0]
-    rows = [bench_size(n, args.repeats) for n in args.sizes]
-    units = bench_units(args.sizes[0], args.repeats)
-    big = bench_big(args.big) if args.big else None
+    skipped: dict = {}
+    last: dict = {}
+    rows = [bench_size(n, args.data, estimators, args.repeats, args.cap, skipped, last) for n in args.sizes]
+    builtin = [e.name for e in estimators if e.origin == "built-in"]
+    campaign = bench_campaign(args.campaign_runs, builtin) if args.campaign_runs and builtin else None
+    big = bench_big(args.big, args.data) if args.big else None
     load_after = os.getloadavg()[0]
+    result = {"big": big, "data": args.data, "threads": args.threads, "blas": _blas(), "repeats": args.repeats,
+              "cap_s": args.cap, "sizes": rows, "skipped": skipped, "broken": [list(b) for b in found.broken],
+              "campaign": campaign,
+              "load_average": [load_before, load_after]}
     if args.json:
-        print(json.dumps({"sizes": rows, "units": units, "big": big, "load_average": [load_before, load_after]}, indent=2))
+        print(json.dumps(result, indent=2))
         return 0
-    print(f"p = {P}, noise U[-1, 1], bound 1, prior [0, 2]^{P}; times are medians of {args.repeats} runs, "
-          f"ratios to numpy.linalg.lstsq in the same run (load average {load_before:.2f} -> {load_after:.2f} on "
-          f"{os.cpu_count()} cores: other processes distort timings)")
-    head = f"{'N':>9} {'lstsq s':>9} {'hull x':>8} {'cgsp x':>8} {'wls x':>7} {'hull width':>11} {'cgsp width':>11} {'cgsp/hull':>10}  enclosed"
-    print(head)
+    print(f"data {args.data}, p = {P}, bound 1, errors U[-1, 1]; BLAS: {result['blas']}; medians of {args.repeats} "
+          f"interleaved runs; x = time / lstsq time at the same N (load average {load_before:.2f} -> "
+          f"{load_after:.2f} on {os.cpu_count()} cores: other processes distort timings)")
+    names = [e.name for e in estimators] + ([HULL_LPS] if any(HULL_LPS in r["methods"] for r in rows) else [])
+    print(f"{'method':>14} " + " ".join(f"{'N=' + str(r['N']):>26}" for r in rows))
+    print(f"{'lstsq':>14} " + " ".join(f"{r['lstsq_s'] * 1e3:>23.2f} ms" for r in rows))
+    for name in names:
+        cells = []
+        for r in rows:
+            m = r["methods"].get(name)
+            if m is None:
+                cells.append(f"{'skipped':>26}")
+            elif "error" in m:
+                cells.append(f"{'error':>26}")
+            else:
+                enc = "" if m["encloses"] else " MISS"
+                cells.append(f"{m['seconds'] * 1e3:>9.1f} ms {m['ratio']:>7.2f}x{enc:>5}   ")
+        print(f"{name:>14} " + " ".join(cells))
+    print("mean width / hull's: " + "; ".join(
+        f"{name} " + " ".join(f"{r['methods'][name]['width_vs_hull']:.3g}" for r in rows
+                              if "width_vs_hull" in r["methods"].get(name, {})) for name in names
+        if name not in ("hull", HULL_LPS)))
     for r in rows:
-        print(f"{r['N']:>9} {r['lstsq_s']:>9.4f} {r['hull_ratio']:>8.2f} {r['cgsp_ratio']:>8.2f} {r['wls_ratio']:>7.2f} "
-              f"{r['hull_width']:>11.3e} {r['cgsp_width']:>11.3e} {r['width_ratio_cgsp_over_hull']:>10.0f}  "
-              f"{r['hull_encloses'] and r['cgsp_encloses']}")
-    u = units
-    print(f"hull at N = {u['N']} in other units: {u['units_ratio']:.2f}x the SI time, endpoints differ by at most "
-          f"{u['units_max_diff_over_width']:.1e} widths; at a 1e-12 relative bound: {u['tight_ratio']:.2f}x the SI time, "
-          f"mean width {u['tight_width_over_bound']:.2f} bounds, encloses truth: {u['tight_encloses']}")
+        for name, m in r["methods"].items():
+            if "error" in m:
+                print(f"error at N = {r['N']}: {name}: {m['error']}")
+    for name, why in skipped.items():
+        print(f"{name}: {why}")
+    for name, why in found.broken:
+        print(f"broken plugin {name}: {why}")
+    forty = [r for r in rows if r["N"] == 40000 and "ratio" in r["methods"].get("hull", {})]
+    if forty:
+        ratio = forty[0]["methods"]["hull"]["ratio"]
+        lps = forty[0]["methods"].get(HULL_LPS, {}).get("ratio", float("nan"))
+        print(f"target: hull at N = 40 000 at most 3x lstsq: ident.estimate {ratio:.2f}x "
+              f"({'met' if ratio <= 3 else 'MISSED'}), its LPs alone {lps:.2f}x")
     if big:
-        print(f"hull at N = {big['N']}: {big['hull_s']:.2f} s ({big['hull_ratio']:.2f}x lstsq = {big['lstsq_s']:.2f} s), "
-              f"peak traced memory {big['peak_over_W']:.2f}x W ({big['W_MB']:.0f} MB), mean width {big['hull_width']:.3e}, "
-              f"{big['working_rows']} working rows, {big['lp_iterations']} LP iterations, encloses truth: {big['hull_encloses']}")
-        forty = [r for r in rows if r["N"] == 40000]
-        verdict = [
-            ("hull at 40 000 within 10x lstsq", forty[0]["hull_ratio"] <= 10 if forty else None),
-            ("hull at 10^6 under 10 s", big["hull_s"] < 10),
-            ("peak memory under 3x W", big["peak_over_W"] < 3),
-        ]
-        print("targets: " + "; ".join(f"{k}: {'n/a' if v is None else ('met' if v else 'MISSED')}" for k, v in verdict))
+        print(f"hull at N = {big['N']}: {big['hull_s']:.2f} s ({big['hull_ratio']:.2f}x lstsq = "
+              f"{big['lstsq_s']:.2f} s), "
+              f"peak traced memory {big['peak_over_W']:.2f}x W ({big['W_MB']:.0f} MB), {big['working_rows']} working "
+              f"rows, {big['lp_iterations']} LP iterations, encloses truth: {big['encloses']}")
+    if campaign:
+        print(f"campaign throughput (enclosure --quick, {args.campaign_runs} runs each, simulation included):")
+        for label, c in campaign.items():
+            if "error" in c:
+                print(f"  {label:>14}: error {c['error']}")
+                continue
+            ms = ", ".join(f"{k} {v:.3f} s" for k, v in c["method_seconds"].items())
+            print(f"  {label:>14}: {c['runs_per_minute']:6.1f} runs/min ({c['seconds_per_run']:.2f} s/run; median "
+                  f"estimator time {ms})")
     return 0
 
 

@@ -9,7 +9,10 @@ is given by the ``2p`` linear programs ``min / max theta_i over S``. This module
 * with **constraint generation**: the LPs are solved on a working set of rows (a few hundred, chosen spread
   out and near-active), every solution is checked against all N rows, the most violated rows are added and
   the violated LPs re-solved, until no row is violated by more than ``violation_tol * b_k``. This keeps the
-  LPs small, so ``N = 10^6`` rows cost a few passes over ``W``;
+  LPs small, so ``N = 10^6`` rows cost a few passes over ``W``. A check visits only the rows a solution can
+  violate: ``|W_k z| <= ||W_k diag(d)|| ||z / d||`` (Cauchy-Schwarz in the LP's scaled coordinates) rules out
+  every row whose strip leaves more room around the centre, so the rows near the set's boundary are gathered
+  once and each solution costs a product with them only;
 * with **safe bounds** (Neumaier & Shcherbina, Math. Program. 99, 2004): for ``min c^T x`` subject to
   ``bl <= A x <= bu``, ``xl <= x <= xu`` and *any* ``y``, with ``r = A^T y - c`` enclosed rigorously,
   ``mu = sum_i min(y_i bl_i, y_i bu_i) + sum_j min(-r_j xl_j, -r_j xu_j)`` (summed with downward rounding)
@@ -46,6 +49,7 @@ from ident.numerics.lp import (
     LPError,
     LPModel,
     SafeBound,
+    SafeBounds,
     column_scale,
     power2_scale,
     safe_lower_bound,
@@ -65,6 +69,9 @@ __all__ = [
     "strip_bounds",
 ]
 
+#: a problem with at most this many rows is solved on all of them from the start (no constraint generation:
+#: on such small problems it saves nothing, and at bounds of 1e-12 relative HiGHS failed some working-set LPs)
+ALL_ROWS_UP_TO = 150
 _CHUNK = 8192  # rows per block when scanning W: temporaries stay small (no page-fault cost, little memory)
 
 
@@ -128,23 +135,16 @@ def _violated_rows(W, dx_cols, m0, thr, skip):
     return np.concatenate(rows), np.vstack(devs)
 
 
-def _initial_sets(W, m0, half, initial_rows, pool_rows):
-    """The first working set and the candidate pool (sorted): rows ranked by the distance of the centre to
-    their strip boundary (slack / row norm), the nearest ``initial_rows`` plus ``2p`` spread rows, and the
-    nearest ``pool_rows``."""
-    n_rows, p = W.shape
-    n_pool = min(n_rows, max(pool_rows, initial_rows))
-    if n_pool < n_rows:
-        dist = np.abs(m0) - half
-        dist /= np.sqrt(np.einsum("ij,ij->i", W, W)) + 1e-300
-        pool = np.argpartition(-dist, n_pool - 1)[:n_pool]
-        pool = pool[np.argsort(-dist[pool])]
-        del dist
-    else:
-        pool = np.arange(n_rows)
-    first = pool[: min(initial_rows, pool.size)]
-    first = np.union1d(first, _spread_rows(n_rows, 2 * p))
-    return first, np.sort(pool)
+def _row_norms(W, d):
+    """(N,) ``||W_k diag(d)||_2``: each row's Euclidean norm in the LP's scaled coordinates (one pass)."""
+    return np.sqrt(np.einsum("ij,ij,j->i", W, W, d * d))  # no (N, p) temporary
+
+
+def _near_rows(rho, pool_rows):
+    """The ``pool_rows`` rows of smallest critical radius ``rho`` (all rows when there are fewer), sorted by it."""
+    n_rows = rho.size
+    near = np.argpartition(rho, pool_rows - 1)[:pool_rows] if pool_rows < n_rows else np.arange(n_rows)
+    return near[np.argsort(rho[near], kind="stable")]
 
 
 def _worst(v, candidates, violation_tol, add_rows):
@@ -160,46 +160,70 @@ def _worst(v, candidates, violation_tol, add_rows):
 
 def _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi):
     """The 2p safe bounds (LP j < p: lower of theta_j; LP p + j: upper) over the prior, then once more over the
-    box they give (it encloses the set, so the bound stays valid and the residual costs only that box)."""
+    box they give (it encloses the set, so the bound stays valid and the residual costs only that box).
+    All 2p at once (:class:`~ident.numerics.lp.SafeBounds`: the rows of every LP's duals gathered once)."""
     p = prior_lo.size
+    rows = np.unique(np.concatenate([r for r, _ in duals]))
+    Y = np.zeros((rows.size, 2 * p))
+    for j, (r, yd) in enumerate(duals):
+        Y[np.searchsorted(rows, r), j] = yd
+    bounds = SafeBounds(W[rows], bl[rows], bu[rows], costs, Y, theta0)
     lower, upper = prior_lo.copy(), prior_hi.copy()
-    bounds = [SafeBound(W[rows], bl[rows], bu[rows], costs[j], yd, theta0) for j, (rows, yd) in enumerate(duals)]
     for refine in (False, True):
         if refine and np.any(lower > upper):
             break  # the set is proven empty: no box to refine over
-        box_lo, box_hi = (lower.copy(), upper.copy()) if refine else (prior_lo, prior_hi)
-        for j in range(2 * p):
-            mu = bounds[j].over(box_lo, box_hi)
-            if j < p:
-                lower[j] = max(lower[j], mu)
-            else:
-                upper[j - p] = min(upper[j - p], -mu)
+        mu = bounds.over(lower.copy(), upper.copy()) if refine else bounds.over(prior_lo, prior_hi)
+        lower = np.maximum(lower, mu[:p])
+        upper = np.minimum(upper, -mu[p:])
     return lower, upper
 
 
 class _WorkingSet:
     """The rows of one hull model under constraint generation: the strips in the model's shifted coordinates
-    (centres ``m0``, half-widths ``half``), the rows added so far (``idx``, in the model's order), the pool."""
+    (centres ``m0``, half-widths ``half``), the rows added so far (``idx``, in the model's order).
 
-    def __init__(self, W, m0, half, unit, size, pool, model: LPModel) -> None:
-        self.W, self.m0, self.half, self.unit, self.size = W, m0, half, unit, size
+    A row can be violated by a point ``z`` only if ``||z / d||`` exceeds its critical radius
+    ``rho_k = (half_k + tol unit_k - |m0_k|) / ||W_k diag(d)||`` (Cauchy-Schwarz in the LP's scaled coordinates:
+    ``|W_k z| <= ||W_k diag(d)|| ||z / d||``). The ``pool_rows`` rows of smallest ``rho`` are gathered once,
+    sorted by ``rho``: the rows a solution may violate are a prefix of them, checked exactly; a solution farther
+    out than the pool's last ``rho`` is checked on the whole pool (steering only), and the final check of all
+    solutions then makes one pass over ``W`` (float: the checks steer the LPs, the safe bounds make the
+    endpoints rigorous)."""
+
+    _MARGIN = 1.0 + 1e-9  # on the Cauchy-Schwarz bound, for the rounding of the norms
+
+    def __init__(self, W, m0, half, unit, size, d, near, rho_near, model: LPModel) -> None:
+        self.W, self.m0, self.half, self.unit, self.size, self.d = W, m0, half, unit, size, d
         self.inv_unit = 1.0 / np.maximum(unit, np.finfo(float).tiny)
         self.mask = np.zeros(W.shape[0], dtype=bool)
-        self.idx = pool[:0]
-        self.pool = pool
+        self.idx = np.zeros(0, dtype=np.int64)
         self.model = model
-        self._pooled: dict = {}
+        self.near, self.rho = near, rho_near
+        self.all_near = near.size == W.shape[0]  # the pool is every row: every check is complete
+        self.nW, self.nm0, self.nhalf, self.ninv = W[near], m0[near], half[near], self.inv_unit[near]
+        self.nmask = np.zeros(near.size, dtype=bool)  # pool rows already in the model
+        self.pos = np.full(W.shape[0], -1, dtype=np.int64)
+        self.pos[near] = np.arange(near.size)
 
     def add(self, rows) -> None:
         self.model.add_shifted_rows(self.W[rows], self.m0[rows] - self.half[rows], self.m0[rows] + self.half[rows],
                                     self.size[rows])
         self.mask[rows] = True
+        at = self.pos[rows]
+        self.nmask[at[at >= 0]] = True
         self.idx = np.concatenate([self.idx, rows])
 
+    def _prefix(self, dz_cols) -> tuple[int, bool]:
+        """How many pool rows the shifted points ``dz_cols`` (p, k) may violate, and whether no other row can."""
+        u = dz_cols / self.d[:, None]
+        radius = float(np.sqrt(np.max(np.einsum("ij,ij->j", u, u)))) * self._MARGIN
+        cnt = int(np.searchsorted(self.rho, radius, side="right"))
+        return cnt, self.all_near or cnt < self.rho.size
+
     def solve(self, cost, max_rounds, violation_tol, add_rows):
-        """Solve ``min cost^T theta`` on the working set, adding the pool's worst violated rows and re-solving
-        until the pool is clean. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the
-        duals' rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
+        """Solve ``min cost^T theta`` on the working set, adding the worst violated pool rows and re-solving until
+        none is violated. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the duals'
+        rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
         sol, rows = None, self.idx
         for _ in range(max_rounds):
             try:
@@ -208,32 +232,39 @@ class _WorkingSet:
                 return None, rows
             if sol.status == "infeasible":
                 return sol, rows
-            if self._pooled.get("rows") is not self.pool:  # the pool's rows, gathered once per pool
-                p = self.pool
-                self._pooled.update(rows=p, W=self.W[p], m0=self.m0[p], half=self.half[p], inv=self.inv_unit[p])
-            free = ~self.mask[self.pool]
-            if not free.any():
+            cnt, complete = self._prefix(sol.z[:, None])
+            if cnt == 0:
                 return sol, rows
-            pw = self._pooled
-            v = (np.abs(pw["W"] @ sol.z - pw["m0"]) - pw["half"]) * pw["inv"]
-            new = _worst(v[free], self.pool[free], violation_tol, add_rows)
+            v = self.nW[:cnt] @ sol.z  # in place: v = (|W z - m0| - half) / unit, the scaled violation
+            v -= self.nm0[:cnt]
+            np.abs(v, out=v)
+            v -= self.nhalf[:cnt]
+            v *= self.ninv[:cnt]
+            v[self.nmask[:cnt]] = -np.inf  # rows already in the model
+            new = _worst(v, self.near[:cnt], violation_tol, add_rows if complete else 3 * add_rows)
             if new.size == 0:
                 return sol, rows
             self.add(new)
         return sol, rows
 
     def full_check(self, dx_cols, violation_tol, add_rows) -> list:
-        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (one blocked pass); add the worst
-        violated rows of each to the model and the pool. Returns, per column, the rows added for it."""
-        rows, dev = _violated_rows(self.W, dx_cols, self.m0, self.half + violation_tol * self.unit, self.mask)
+        """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (a prefix of the pool when that is
+        complete, else one blocked pass over ``W``); add the worst violated rows of each to the model. Returns,
+        per column, the rows added."""
+        cnt, complete = self._prefix(dx_cols)
+        if complete:
+            dev = np.abs(self.nW[:cnt] @ dx_cols - self.nm0[:cnt, None])
+            rows = self.near[:cnt]
+            hit = (dev.max(axis=1) > self.nhalf[:cnt] + violation_tol * self.unit[rows]) & ~self.nmask[:cnt]
+            rows, dev = rows[hit], dev[hit]
+        else:
+            rows, dev = _violated_rows(self.W, dx_cols, self.m0, self.half + violation_tol * self.unit, self.mask)
         if not rows.size:
             return [rows] * dx_cols.shape[1]
         v = (dev - self.half[rows, None]) * self.inv_unit[rows, None]
         new = [_worst(v[:, col], rows, violation_tol, add_rows) for col in range(dx_cols.shape[1])]
         if any(n.size for n in new):
-            added = np.unique(np.concatenate(new))
-            self.add(added)
-            self.pool = np.union1d(self.pool, added)
+            self.add(np.unique(np.concatenate(new)))
         return new
 
 
@@ -247,9 +278,9 @@ def interval_hull(
     scale: np.ndarray | None = None,
     row_scale: np.ndarray | None = None,
     center: np.ndarray | None = None,
-    initial_rows: int = 150,
+    initial_rows: int = 60,
     pool_rows: int = 4000,
-    add_rows: int = 10,
+    add_rows: int = 20,
     violation_tol: float = 1e-10,
     lp_tol: float = 1e-9,
     max_rounds: int = 100,
@@ -266,13 +297,15 @@ def interval_hull(
     Scaling (units-invariant, module docstring and :class:`~ident.numerics.lp.LPModel`): rows by the power of
     two nearest ``1 / row_scale_k``, then columns to unit root-mean-square, shifted to ``center``.
 
-    Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary; the
-    nearest ``initial_rows`` form the first working set and the nearest ``pool_rows`` a candidate pool.
+    Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary (in the LP's
+    scaled coordinates); the nearest ``initial_rows`` and ``2p`` spread rows form the first working set.
     The 2p LPs are solved one after the other (all minima, then all maxima in reverse order, so that
-    consecutive optima are close and warm starts cheap); after each solve the pool is checked and up to
-    ``add_rows`` most violated rows are added and the LP re-solved, until the pool is clean. Then every
-    solution is checked against all N rows at once (one blocked pass over ``W``); violated LPs get their
-    worst rows added and are re-solved, until no row is off by more than ``violation_tol * scale``.
+    consecutive optima are close and warm starts cheap); after each solve the rows it may violate (the
+    Cauchy-Schwarz test of the module docstring, exact for the rest) are checked and up to ``add_rows`` most
+    violated rows are added and the LP re-solved, until none is violated. Then every solution is checked
+    against all N rows at once the same way; violated LPs get their worst rows added and are re-solved, until
+    no row is off by more than ``violation_tol * scale``. The safe bounds of the 2p LPs are evaluated together
+    (:func:`_safe_endpoints`).
 
     Inputs are assumed validated (finite, ``bl <= bu``, ``prior_lo <= prior_hi``). Returns a
     :class:`HullResult`; ``status == 'infeasible'`` when HiGHS found a working set infeasible (the caller
@@ -293,7 +326,12 @@ def interval_hull(
     theta0 = 0.5 * (prior_lo + prior_hi) if center is None else np.asarray(center, float)
     theta0 = np.clip(np.where(np.isfinite(theta0), theta0, 0.5 * (prior_lo + prior_hi)), prior_lo, prior_hi)
     m0 = mid - _matvec(W, theta0)  # strip centres in the shifted coordinates (float: steers the LPs only)
-    first, pool = _initial_sets(W, m0, half, initial_rows, pool_rows)
+    d = column_scale(W, power2_scale(size))
+    rho = (half + violation_tol * unit - np.abs(m0)) / (_row_norms(W, d) + 1e-300)  # critical radii
+    initial_rows, add_rows = max(initial_rows, 4 * p), max(add_rows, p)  # many parameters: more rows at once
+    near = _near_rows(rho, max(pool_rows, initial_rows))
+    first = np.arange(n_rows) if n_rows <= ALL_ROWS_UP_TO else np.union1d(near[:initial_rows],
+                                                                         _spread_rows(n_rows, 2 * p))
     n_lp = 2 * p
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
@@ -305,9 +343,8 @@ def interval_hull(
     lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
     todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
-        model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=column_scale(W, power2_scale(size)),
-                        tolerance=lp_tol, **PRIMAL_SIMPLEX)
-        ws = _WorkingSet(W, m0, half, unit, size, pool, model)
+        model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=d, tolerance=lp_tol, **PRIMAL_SIMPLEX)
+        ws = _WorkingSet(W, m0, half, unit, size, d, near, rho[near], model)
         ws.add(first)
         while todo and rounds < max_rounds and not infeasible:
             rounds += 1

@@ -16,9 +16,10 @@
   hull's 2p LPs and the Chebyshev fit, the Oettli-Prager LP, the online models, the big-M MILP and the
   branch-and-bound LP, the prediction envelope, the half-width LPs of the experiment design): rows added in
   dense or sparse blocks (constraint generation appends), column bounds, costs, warm-started re-solves, every
-  status checked, the scaling done once (a shift to a centre, rows by powers of two nearest their size,
-  columns by powers of two) and the duals returned for the original rows and cost. :class:`SafeBound` (with :func:`safe_lower_bound`, :func:`safe_upper_bound`,
-  :func:`shifted_safe_bound`) turns any duals into a rigorous bound over a box (Neumaier & Shcherbina,
+  status checked, the scaling done once (a shift to a centre, rows by powers of two nearest their size, columns
+  by powers of two) and the duals returned for the original rows and cost. :class:`SafeBound` (with
+  :func:`safe_lower_bound`, :func:`safe_upper_bound`, :func:`shifted_safe_bound`; :class:`SafeBounds` for many
+  LPs over the same rows at once) turns any duals into a rigorous bound over a box (Neumaier & Shcherbina,
   Math. Program. 99, 2004), so neither the scaling nor the LP tolerances can affect rigour.
 """
 
@@ -34,7 +35,7 @@ import highspy
 import numpy as np
 
 from ident.errors import LPError, LPFallbackWarning
-from ident.numerics.interval import down, mul, point_matmul, sub, sum_down, up
+from ident.numerics.interval import TINY, U, down, mul, point_matmul, sub, sum_down, up
 
 __all__ = [
     "LARGE_ENTRY",
@@ -43,6 +44,7 @@ __all__ = [
     "LPModel",
     "LPSolution",
     "SafeBound",
+    "SafeBounds",
     "add_dense_rows",
     "check",
     "column_scale",
@@ -414,6 +416,57 @@ class SafeBound:
         plo, _ = mul(-self.rhi, -self.rlo, xl, xu)
         mu = float(sum_down(np.concatenate([self.rows, plo])))
         return mu if self.x0 is None else float(down(mu + self.cx0))
+
+
+def _dot_constant(counts) -> np.ndarray:
+    """``2 (n + 2) u`` for each count n (the constant of :func:`ident.numerics.interval.dot_error`)."""
+    return 2.0 * (np.asarray(counts, dtype=float) + 2.0) * U
+
+
+class SafeBounds:
+    """:class:`SafeBound` for k LPs over the same rows at once: ``min c_j^T x  s.t.  bl <= A x <= bu`` with the
+    dual guesses ``Y[:, j]``, around one float point ``x0`` (e.g. the 2p LPs of an interval hull).
+
+    A : (m, n) float; bl, bu : (m,) finite; C : (k, n) the costs; Y : (m, k) the duals (a zero entry: the row is
+    not in that LP's guess; non-finite entries are dropped, any y being valid); x0 : (n,).
+    The same maths as :class:`SafeBound` (Neumaier & Shcherbina, Math. Program. 99, 2004): the shifted row
+    bounds ``bl - A x0``, ``bu - A x0`` (rounded outward) computed once for all LPs, the residuals
+    ``A^T Y - C^T`` by one enclosed product. Every dot product and sum of LP j is bounded as a sum of its own
+    ``nnz(Y[:, j])`` (+ n) non-zero terms: the zero entries add exactly in any order, so the error bound of a
+    sum of that many terms holds (Rump et al. 2009's constants, :mod:`ident.numerics.interval`).
+    """
+
+    def __init__(self, A, bl, bu, C, Y, x0) -> None:
+        A = np.asarray(A, dtype=float)
+        C = np.asarray(C, dtype=float)
+        Y = np.array(Y, dtype=float)
+        self.x0 = np.asarray(x0, dtype=float)
+        Y[~np.isfinite(Y)] = 0.0
+        counts = np.count_nonzero(Y, axis=0)
+        alo, ahi = point_matmul(A, self.x0)
+        sbl, sbu = down(np.asarray(bl, float) - ahi), up(np.asarray(bu, float) - alo)  # strips around x0
+        rows = down(np.where(Y > 0, Y * np.where(Y > 0, sbl[:, None], 0.0),
+                             Y * np.where(Y < 0, sbu[:, None], 0.0)))
+        self.rows = np.where(Y != 0.0, rows, 0.0)  # (m, k): min(y bl, y bu) rounded down, exact zeros elsewhere
+        g = A.T @ Y  # (n, k)
+        e = up(up(_dot_constant(counts) * (np.abs(A).T @ np.abs(Y))) + TINY)
+        none = counts == 0  # no row: the product is exactly zero
+        self.rlo, self.rhi = sub(np.where(none, 0.0, down(g - e)), np.where(none, 0.0, up(g + e)), C.T, C.T)
+        self.cx0 = sum_down(down(C * self.x0), axis=1)  # (k,) c_j^T x0, rounded down
+        self.n_terms = counts + A.shape[1]
+
+    def over(self, xl, xu) -> np.ndarray:
+        """The k bounds (k,) over the column box ``[xl, xu]`` (finite)."""
+        xl = np.asarray(xl, dtype=float)
+        xu = np.asarray(xu, dtype=float)
+        if not (np.all(np.isfinite(xl)) and np.all(np.isfinite(xu))):
+            raise ValueError("SafeBounds.over needs finite column bounds xl, xu")
+        zl, zu = down(xl - self.x0), up(xu - self.x0)
+        plo, _ = mul(-self.rhi, -self.rlo, zl[:, None], zu[:, None])  # (n, k) min of -r z over the box
+        v = np.vstack([self.rows, plo])
+        s = np.sum(v, axis=0)
+        mu = down(s - up(up(_dot_constant(self.n_terms) * np.sum(np.abs(v), axis=0)) + TINY))
+        return down(mu + self.cx0)
 
 
 def safe_lower_bound(A, bl, bu, xl, xu, c, y) -> float:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from ident.numerics.lp import LPError, LPModel, SafeBound, column_scale, power2_scale, safe_lower_bound
+from ident.numerics.lp import LPError, LPModel, SafeBound, SafeBounds, column_scale, power2_scale, safe_lower_bound
 
 
 def _random_lp(rng, m, n):
@@ -130,3 +130,40 @@ def test_unnormalised_cost_gives_the_same_duals():
         duals.append(sol.duals)
         assert safe_lower_bound(A, lo, hi, xl, xu, c, sol.duals) <= c @ sol.x + 1e-9 * np.abs(c) @ (xu - xl)
     np.testing.assert_allclose(duals[0], duals[1], rtol=1e-6, atol=1e-9 * np.max(np.abs(duals[0])))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_safe_bounds_of_many_lps_at_once_agree_with_one_by_one_and_stay_below_linprog(seed):
+    """SafeBounds (k LPs over the rows of all their duals, each LP's zeros left out of its error bounds) gives
+    SafeBound's bound of each LP to rounding, below linprog's optimum, for the LPs' own duals and random ones."""
+    rng = np.random.default_rng(seed)
+    A, lo, hi, xl, xu, x_star = _random_lp(rng, 50, 4)
+    k = 6
+    C = rng.normal(size=(k, 4))
+    Y = np.zeros((50, k))
+    model = LPModel(xl, xu, center=x_star)
+    model.add_rows(A, lo, hi, 0.5 * hi - 0.5 * lo)
+    refs = []
+    for j in range(k):
+        if j < 4:
+            Y[:, j] = model.solve(C[j]).duals  # the LP's own duals: tight
+        else:
+            Y[rng.choice(50, 10, replace=False), j] = rng.normal(size=10)  # a sparse wrong guess: still a bound
+        ref = linprog(C[j], A_ub=np.vstack([A, -A]), b_ub=np.concatenate([hi, -lo]), bounds=list(zip(xl, xu)),
+                      method="highs")
+        refs.append(ref.fun)
+    Y[3, 5] = np.nan  # dropped, as SafeBound drops it
+    many = SafeBounds(A, lo, hi, C, Y, x_star)
+    for box_lo, box_hi in ((xl, xu), (x_star - 0.1 * (xu - xl), x_star + 0.1 * (xu - xl))):
+        mu = many.over(box_lo, box_hi)
+        for j in range(k):
+            y = np.where(np.isfinite(Y[:, j]), Y[:, j], 0.0)
+            one = SafeBound(A, lo, hi, C[j], y, x_star).over(box_lo, box_hi)
+            scale = np.abs(C[j]) @ (xu - xl) + 1.0
+            assert mu[j] == pytest.approx(one, abs=1e-12 * scale)
+            if box_lo is xl:  # over the LP's own box: below the optimum, tight for the LP's duals
+                assert mu[j] <= refs[j]
+                if j < 4:
+                    assert mu[j] == pytest.approx(refs[j], abs=1e-6 * scale)
+    with pytest.raises(ValueError, match="finite"):
+        many.over(np.full(4, -np.inf), xu)

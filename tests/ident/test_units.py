@@ -312,7 +312,7 @@ def test_highs_rejects_a_block_with_a_huge_entry_and_the_helper_says_so():
         add_dense_rows(h, np.array([[1.0, 2e15]]), np.array([0.0]), np.array([1.0]))
 
 
-@pytest.mark.parametrize("fail_at", [1, 2, 5])
+@pytest.mark.parametrize("fail_at", [1, 2])  # the first block of rows, or a block added by constraint generation
 def test_a_model_highs_rejects_gives_a_coarser_box_with_a_warning_never_a_tighter_one(monkeypatch, fail_at):
     import ident.numerics.lp as lp_module  # the LP core adds every row block of the hull's models
     from ident.numerics.lp import LPError, LPFallbackWarning
@@ -334,6 +334,7 @@ def test_a_model_highs_rejects_gives_a_coarser_box_with_a_warning_never_a_tighte
     monkeypatch.setattr(lp_module, "add_dense_rows", flaky)
     with pytest.warns(LPFallbackWarning):
         box = ident.estimate(W, y, b, (lo, hi))
+    assert calls["n"] >= fail_at  # the rejection did happen
     assert np.all(box.lower <= exact_lo + 1e-9) and np.all(box.upper >= exact_hi - 1e-9)
 
 
