@@ -72,6 +72,18 @@ def clip_to_prior(lower, upper, lo, hi):
     return lower, upper
 
 
+def set_box(method: str, c, rad, lo, hi, names, W, y, b, prior, set_info: dict, **info):
+    """The final box of a set estimator: the set's hull ``c +- rad`` intersected with the prior, its set in
+    ``info["set"]``; an empty intersection (only through rounding: the set meets the prior by construction) is an
+    inconsistency naming ``method``."""
+    from ident import Box
+
+    clipped = clip_to_prior(c - rad, c + rad, lo, hi)
+    if clipped is None:
+        raise inconsistent(f"the {method} does not meet the prior", W, y, b, prior)
+    return Box(clipped[0], clipped[1], names, info={"method": method, **info, "set": set_info})
+
+
 def inconsistent(message: str, W, y, b, prior):
     """An ``ident.InconsistentDataError`` for data proven (or found) inconsistent with the prior.
 

@@ -36,7 +36,7 @@ import math
 import numpy as np
 
 from ident import Box
-from ident.estimators._common import check_inputs, clip_to_prior, inconsistent
+from ident.estimators._common import check_inputs, inconsistent, set_box
 
 __all__ = ["ellipsoid", "strip_update"]
 
@@ -134,12 +134,8 @@ def ellipsoid(W, y, bound, prior) -> Box:
             cuts += 1
             P = 0.5 * (P + P.T) * inflate
     rad = np.sqrt(np.maximum(np.diag(P), 0.0)) * inflate
-    clipped = clip_to_prior(c - rad, c + rad, lo, hi)
-    if clipped is None:  # only through rounding: the ellipsoid contains part of the prior by construction
-        raise inconsistent("the bounding ellipsoid does not meet the prior", W, y, b, prior)
-    return Box(clipped[0], clipped[1], names,
-               info={"method": "ellipsoid", "cuts": cuts,
-                     "set": {"type": "ellipsoid", "center": c.tolist(), "shape": P.tolist()}})
+    return set_box("ellipsoid", c, rad, lo, hi, names, W, y, b, prior,
+                   {"type": "ellipsoid", "center": c.tolist(), "shape": P.tolist()}, cuts=cuts)
 
 
 ellipsoid.kind = "guaranteed"

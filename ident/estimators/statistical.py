@@ -137,47 +137,45 @@ def _iv(W, y, bound, prior, instruments, level):
     return _confidence(theta, C, N - p, level, lo, hi, names, "iv", {"s2": s2})
 
 
-def _attach(f, name, level, description, citation):
-    f.__name__ = name
-    f.kind = "statistical"
-    f.rigorous = False
-    f.level = level
-    f.description = description
-    f.citation = citation
+_CLAIMS = {  # name: (description with {pct} for the level, citation)
+    "ols": ("least squares, {pct} % Bonferroni confidence box (Gaussian homoscedastic errors)",
+            "ordinary least squares; Bonferroni simultaneous t intervals"),
+    "wls": ("Gautier's per-group weighted least squares, {pct} % Bonferroni confidence box",
+            "M. Gautier, P. Poignet, Extended Kalman filtering and weighted least squares dynamic identification "
+            "of robot, Control Engineering Practice 9(12):1361-1372, 2001"),
+    "iv": ("instrumental variables (IDIM-IV), {pct} % Bonferroni confidence box (asymptotic)",
+           "A. Janot, P.-O. Vandanjon, M. Gautier, A generic instrumental variable approach for industrial robot "
+           "identification, IEEE Trans. Control Systems Technology 22(1):132-145, 2014"),
+}
+
+
+def _attach(f, name: str, level: float, suffix: str = ""):
+    """Set the registry's claims of the statistical estimator ``name`` at ``level`` on ``f``; returns ``f``."""
+    description, citation = _CLAIMS[name]
+    f.__name__ = name + suffix
+    f.kind, f.rigorous, f.level = "statistical", False, level
+    f.description, f.citation = description.format(pct=f"{100 * level:g}"), citation
     return f
-
-
-_OLS_CITE = "ordinary least squares; Bonferroni simultaneous t intervals"
-_WLS_CITE = ("M. Gautier, P. Poignet, Extended Kalman filtering and weighted least squares dynamic identification "
-             "of robot, Control Engineering Practice 9(12):1361-1372, 2001")
-_IV_CITE = ("A. Janot, P.-O. Vandanjon, M. Gautier, A generic instrumental variable approach for industrial robot "
-            "identification, IEEE Trans. Control Systems Technology 22(1):132-145, 2014")
 
 
 def ols_at(level: float):
     """The :func:`ols` estimator at confidence ``level`` in (0, 1)."""
     level = _check_level(level)
-    return _attach(lambda W, y, bound, prior: _ols(W, y, bound, prior, level), f"ols_{level:g}", level,
-                   f"least squares, {100 * level:g} % Bonferroni confidence box (Gaussian homoscedastic errors)",
-                   _OLS_CITE)
+    return _attach(lambda W, y, bound, prior: _ols(W, y, bound, prior, level), "ols", level, f"_{level:g}")
 
 
 def wls_at(level: float):
     """The :func:`wls` estimator at confidence ``level`` in (0, 1)."""
     level = _check_level(level)
-    return _attach(lambda W, y, bound, prior, groups=None: _wls(W, y, bound, prior, groups, level),
-                   f"wls_{level:g}", level,
-                   f"Gautier's per-group weighted least squares, {100 * level:g} % Bonferroni confidence box",
-                   _WLS_CITE)
+    return _attach(lambda W, y, bound, prior, groups=None: _wls(W, y, bound, prior, groups, level), "wls", level,
+                   f"_{level:g}")
 
 
 def iv_at(level: float):
     """The :func:`iv` estimator at confidence ``level`` in (0, 1)."""
     level = _check_level(level)
-    return _attach(lambda W, y, bound, prior, instruments=None: _iv(W, y, bound, prior, instruments, level),
-                   f"iv_{level:g}", level,
-                   f"instrumental variables (IDIM-IV), {100 * level:g} % Bonferroni confidence box (asymptotic)",
-                   _IV_CITE)
+    return _attach(lambda W, y, bound, prior, instruments=None: _iv(W, y, bound, prior, instruments, level), "iv",
+                   level, f"_{level:g}")
 
 
 def ols(W, y, bound, prior, *, level: float = 0.95) -> Box:
@@ -228,11 +226,5 @@ def iv(W, y, bound, prior, *, instruments=None, level: float = 0.95) -> Box:
     return _iv(W, y, bound, prior, instruments, _check_level(level))
 
 
-for _f, _d, _c in ((ols, "least squares, 95 % Bonferroni confidence box (Gaussian homoscedastic errors)", _OLS_CITE),
-                   (wls, "Gautier's per-group weighted least squares, 95 % Bonferroni confidence box", _WLS_CITE),
-                   (iv, "instrumental variables (IDIM-IV), 95 % Bonferroni confidence box (asymptotic)", _IV_CITE)):
-    _f.kind = "statistical"
-    _f.rigorous = False
-    _f.level = 0.95
-    _f.description = _d
-    _f.citation = _c
+for _f in (ols, wls, iv):
+    _attach(_f, _f.__name__, 0.95)

@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from ident import Box
-from ident.estimators._common import check_inputs, clip_to_prior, inconsistent
+from ident.estimators._common import check_inputs, inconsistent, set_box
 
 __all__ = ["parallelotope", "zonotope", "zonotope_at"]
 
@@ -74,6 +74,16 @@ def _cut(w, c, G, yk, bk, rel):
     return Gw, wc, r, max(yk - bk - pad, wc - r), min(yk + bk + pad, wc + r)
 
 
+def _start(lo, hi, p):
+    """The prior box as a zonotope (centre, p generators) and the strips' rounding safeguard."""
+    return 0.5 * (lo + hi), np.diag(0.5 * (hi - lo)), _pad(p), 0
+
+
+def _zonotope_box(method, c, G, lo, hi, names, W, y, b, prior, **info):
+    return set_box(method, c, np.abs(G).sum(axis=1), lo, hi, names, W, y, b, prior,
+                   {"type": "zonotope", "center": c.tolist(), "generators": G.tolist()}, **info)
+
+
 def _misses(what: str, k: int, W, y, b, prior):
     return inconsistent(f"the {what} misses the strip of row {k}: the data appear inconsistent with the prior and "
                         "the bound", W, y, b, prior)
@@ -85,12 +95,8 @@ def _zonotope(W, y, bound, prior, order: int) -> Box:
     if int(order) != order or order < 1:
         raise ValueError(f"order must be an integer >= 1, got {order!r}")
     order = int(order)
-    c = 0.5 * (lo + hi)
-    G = np.diag(0.5 * (hi - lo))
-    cap = (order + 1) * p - 1
-    rel = _pad(p)
-    keep = (order - 1) * p
-    cuts = 0
+    c, G, rel, cuts = _start(lo, hi, p)
+    cap, keep = (order + 1) * p - 1, (order - 1) * p
     for k in range(N):
         w = W[k]
         Gw, wc, r, slo, shi = _cut(w, c, G, y[k], b[k], rel)
@@ -110,13 +116,7 @@ def _zonotope(W, y, bound, prior, order: int) -> Box:
         cuts += 1
         if G.shape[1] > cap:
             G = _reduce(G, keep)
-    rad = np.abs(G).sum(axis=1)
-    clipped = clip_to_prior(c - rad, c + rad, lo, hi)
-    if clipped is None:
-        raise inconsistent("the zonotope does not meet the prior", W, y, b, prior)
-    return Box(clipped[0], clipped[1], names,
-               info={"method": "zonotope", "order": order, "cuts": cuts,
-                     "set": {"type": "zonotope", "center": c.tolist(), "generators": G.tolist()}})
+    return _zonotope_box('zonotope', c, G, lo, hi, names, W, y, b, prior, order=order, cuts=cuts)
 
 
 def zonotope_at(order: int):
@@ -189,10 +189,7 @@ def parallelotope(W, y, bound, prior) -> Box:
     """
     W, y, b, lo, hi, names = check_inputs(W, y, bound, prior)
     N, p = W.shape
-    c = 0.5 * (lo + hi)
-    G = np.diag(0.5 * (hi - lo))
-    rel = _pad(p)
-    cuts = 0
+    c, G, rel, cuts = _start(lo, hi, p)
     for k in range(N):
         w = W[k]
         Gw, wc, r, slo, shi = _cut(w, c, G, y[k], b[k], rel)
@@ -207,13 +204,7 @@ def parallelotope(W, y, bound, prior) -> Box:
         G = G - np.outer(lam, Gw)
         G[:, j] = bk * lam
         cuts += 1
-    rad = np.abs(G).sum(axis=1)
-    clipped = clip_to_prior(c - rad, c + rad, lo, hi)
-    if clipped is None:
-        raise inconsistent("the parallelotope does not meet the prior", W, y, b, prior)
-    return Box(clipped[0], clipped[1], names,
-               info={"method": "parallelotope", "cuts": cuts,
-                     "set": {"type": "zonotope", "center": c.tolist(), "generators": G.tolist()}})
+    return _zonotope_box('parallelotope', c, G, lo, hi, names, W, y, b, prior, cuts=cuts)
 
 
 parallelotope.kind = "guaranteed"
