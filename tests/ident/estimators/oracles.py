@@ -86,6 +86,11 @@ def box_contains(box, lo, hi, rel: float = 1e-9):
     return bool(np.all(box.lower <= lo + scale) and np.all(box.upper >= hi - scale))
 
 
+def encloses_exact_hull(box, W, y, b, prior) -> bool:
+    """Whether ``box`` contains the exact hull of the feasible set (:func:`exact_hull`, 2p scipy LPs)."""
+    return box_contains(box, *exact_hull(W, y, b, prior))
+
+
 def critical_case(rng, p: int, N: int):
     """Bounds equal to the exact residual at the truth, rounded up to the next float: the truth is feasible,
     on the boundary of every strip."""

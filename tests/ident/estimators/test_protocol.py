@@ -39,8 +39,7 @@ def test_through_the_registry(spec):
         assert np.asarray(S["generators"]).shape[0] == 4
     assert c.shape == (4,)
     if kind == "guaranteed":
-        lo, hi = oracles.exact_hull(W, y, b, prior)
-        assert oracles.box_contains(box, lo, hi)
+        assert oracles.encloses_exact_hull(box, W, y, b, prior)
 
 
 def test_registered_claims_match_the_modules():
