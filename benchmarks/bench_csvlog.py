@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 READERS = {
-    "arrow": "from sim.csvlog import read_log; read_log(path, engine='arrow')",
-    "numpy-blocks": "from sim.csvlog import read_log; read_log(path, engine='numpy')",
+    "arrow": "from h4bench.sim.csvlog import read_log; read_log(path, engine='arrow')",
+    "numpy-blocks": "from h4bench.sim.csvlog import read_log; read_log(path, engine='numpy')",
     "genfromtxt": "np.genfromtxt(path, delimiter=',', skip_header=1, dtype=float, ndmin=2)",
 }
 

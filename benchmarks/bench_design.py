@@ -28,12 +28,12 @@ import time
 import numpy as np
 import scipy.stats
 
-import ident
-import sim
-import trajectories as tj
-from ident.processing.filtering import ProcessingSettings
-from scenarios.experiment import run_experiment
-from scenarios.spec import load_spec
+from h4bench import ident
+from h4bench import sim
+from h4bench import trajectories as tj
+from h4bench.ident.processing.filtering import ProcessingSettings
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.spec import load_spec
 
 # Poignet, Ramdani & Vivas (CDC 2003), Table 1 (boxes) and Table 2 (WLS estimates), order of ident.PARAMETER_NAMES
 PAPER_BOXES = np.array([

@@ -48,10 +48,10 @@ import tracemalloc  # noqa: E402
 import _setup  # noqa: E402,F401  (repository root on sys.path)
 import numpy as np  # noqa: E402
 
-import ident  # noqa: E402
-from ident.estimators import registry  # noqa: E402
-from ident.estimators.estimate import least_squares_center  # noqa: E402
-from ident.estimators.hull import interval_hull, strip_bounds  # noqa: E402
+from h4bench import ident  # noqa: E402
+from h4bench.ident.estimators import registry  # noqa: E402
+from h4bench.ident.estimators.estimate import least_squares_center  # noqa: E402
+from h4bench.ident.estimators.hull import interval_hull, strip_bounds  # noqa: E402
 
 P = 14
 HULL_LPS = "hull LPs"  # the row of interval_hull alone: the 2p LPs from the least-squares centre
@@ -59,9 +59,9 @@ HULL_LPS = "hull LPs"  # the row of interval_hull alone: the 2p LPs from the lea
 
 def h4_data(n_rows: int, seed: int = 0):
     """The H4 equation on a multi-sine motion: ``(W, y, truth, prior, instruments)`` with ``n_rows // 4`` samples."""
-    import sim
-    from ident.robots.h4 import NOMINAL_PARAMETERS
-    from trajectories.fourier import joint_motion
+    from h4bench import sim
+    from h4bench.ident.robots.h4 import NOMINAL_PARAMETERS
+    from h4bench.trajectories.fourier import joint_motion
 
     geometry = sim.H4Geometry.from_model(sim.load_model())
     n = n_rows // 4
@@ -175,8 +175,8 @@ def bench_big(n: int, data: str) -> dict:
 def bench_campaign(runs: int, names) -> dict:
     """Runs per minute of the ``enclosure`` campaign (``--quick`` spec) with each method alone and all together
     (all those that ran alone: a method the campaign cannot feed, e.g. one that needs instruments, is reported)."""
-    from scenarios.kinds.enclosure import campaign_job
-    from scenarios.registry import load_spec
+    from h4bench.scenarios.kinds.enclosure import campaign_job
+    from h4bench.scenarios.registry import load_spec
 
     spec = load_spec("enclosure", quick=True)
     campaign_job({**spec, "estimators": {**spec["estimators"], "methods": ["hull"]}}, 0, spec["seed"])  # designs cached

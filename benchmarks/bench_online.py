@@ -29,8 +29,8 @@ from pathlib import Path
 import _setup  # noqa: F401  (BLAS threads, repository root; before numpy)
 import numpy as np  # noqa: E402
 
-import ident  # noqa: E402
-from ident.estimators.online import OnlineHull  # noqa: E402
+from h4bench import ident  # noqa: E402
+from h4bench.ident.estimators.online import OnlineHull  # noqa: E402
 
 P = 14
 DT = 1e-3
@@ -38,8 +38,8 @@ DT = 1e-3
 
 def simulated(duration: float, seed: int):
     """Raw rows (time order) of a simulated H4 experiment: W, y, bound, sample index of each row, theta_true."""
-    from scenarios.experiment import run_experiment
-    from scenarios.spec import load_spec
+    from h4bench.scenarios.experiment import run_experiment
+    from h4bench.scenarios.spec import load_spec
 
     spec = load_spec("paper")
     spec["trajectory"]["duration"] = float(duration)

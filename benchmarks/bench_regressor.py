@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-import ident
-import sim
+from h4bench import ident
+from h4bench import sim
 
 
 def main() -> None:

@@ -20,8 +20,8 @@ import types
 import mujoco
 import numpy as np
 
-import ident
-import sim
+from h4bench import ident
+from h4bench import sim
 
 
 def reference_trajectory(geometry, seconds: float, dt: float = 1e-3):

@@ -12,8 +12,8 @@ import time
 
 import numpy as np
 
-import sim
-import trajectories as tj
+from h4bench import sim
+from h4bench import trajectories as tj
 
 PICK_PLACE = np.array([
     [0.0, 0.0, -0.55, 0.0], [0.08, 0.06, -0.52, 0.3], [0.08, 0.06, -0.64, 0.3], [0.08, 0.06, -0.52, 0.3],

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-import ident
+from h4bench import ident
 
 
 def first_half_hull(W, y, bound, prior, groups=None):

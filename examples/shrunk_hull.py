@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-import ident
+from h4bench import ident
 
 FRACTION = 0.10  #: each side moves inward by this fraction of the hull's width
 
@@ -68,7 +68,7 @@ rounded_inward.description = (f"UNSOUND on purpose: the exact hull's endpoints m
 
 def _demo() -> dict:
     """The hull and the shrunk box judged on a random strip problem (truth known)."""
-    from scenarios import judging
+    from h4bench.scenarios import judging
 
     rng = np.random.default_rng(0)
     W = rng.normal(size=(200, 3))

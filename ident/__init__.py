@@ -10,21 +10,21 @@ neither mujoco, python-control, matplotlib, pinocchio nor rerun.
 
 from importlib import import_module
 
-from ident.box import Box
-from ident.errors import (EstimatorError, InconsistentDataError, LPError, LPFallbackWarning, OutlierBudgetError,
+from h4bench.ident.box import Box
+from h4bench.ident.errors import (EstimatorError, InconsistentDataError, LPError, LPFallbackWarning, OutlierBudgetError,
                           ProcessingError, UnidentifiableError)
-from ident.estimators.estimate import estimate, min_consistent_bound
-from ident.estimators.online import OnlineHull
-from ident.estimators.outliers import OutlierRows, detect_outliers, relaxed_hull
-from ident.estimators.wls import WLSResult, wls
+from h4bench.ident.estimators.estimate import estimate, min_consistent_bound
+from h4bench.ident.estimators.online import OnlineHull
+from h4bench.ident.estimators.outliers import OutlierRows, detect_outliers, relaxed_hull
+from h4bench.ident.estimators.wls import WLSResult, wls
 
 _LAZY = {
-    "ident.robots.h4": ("EXTRA_NAMES", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS",
+    "h4bench.ident.robots.h4": ("EXTRA_NAMES", "N_PARAMETERS", "NOMINAL_PARAMETERS", "PARAMETER_NAMES", "PARAMETER_UNITS",
                         "inverse_dynamics", "parameter_names", "parameter_units", "regressor"),
-    "ident.robots.serial": ("BaseParameters", "SerialRobot", "base_parameters"),
+    "h4bench.ident.robots.serial": ("BaseParameters", "SerialRobot", "base_parameters"),
     # the H4 interval regressor (built with the processing chain) and the generic Oettli-Prager hull
-    "ident.robots.h4_interval": ("Distortion", "IntervalEquation", "interval_equation", "interval_regressor"),
-    "ident.estimators.uncertain": ("uncertain_hull",),
+    "h4bench.ident.robots.h4_interval": ("Distortion", "IntervalEquation", "interval_equation", "interval_regressor"),
+    "h4bench.ident.estimators.uncertain": ("uncertain_hull",),
 }
 _LAZY_NAME = {name: module for module, names in _LAZY.items() for name in names}
 
@@ -36,7 +36,7 @@ __all__ = ["Box", "EstimatorError", "InconsistentDataError", "LPError", "LPFallb
 def __getattr__(name: str):
     module = _LAZY_NAME.get(name)
     if module is None:
-        raise AttributeError(f"module 'ident' has no attribute {name!r}")
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     value = getattr(import_module(module), name)
     globals()[name] = value
     return value

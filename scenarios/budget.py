@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident.processing.filtering import ProcessingSettings, parallel_filter
-from ident.processing.processing import raw_equation
-from ident.robots.h4 import regressor
+from h4bench.ident.processing.filtering import ProcessingSettings, parallel_filter
+from h4bench.ident.processing.processing import raw_equation
+from h4bench.ident.robots.h4 import regressor
 
 PARTS = ("noise", "derivatives", "model")
 

@@ -31,11 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-import sim
-from scenarios.rundir import prepare_folder, write_json
-from scenarios.spec import ScenarioError
+import h4bench
+from h4bench import sim
+from h4bench.scenarios.rundir import prepare_folder, write_json
+from h4bench.scenarios.spec import ScenarioError
 
-_PACKAGES = ("sim", "ident", "trajectories", "scenarios")
 # spec keys that do not change what a run computes
 _NOT_INPUTS = {"name", "description", "quick", "quick_applied"}
 _NOT_CAMPAIGN_INPUTS = {"runs", "workers", "scheduler"}
@@ -70,9 +70,8 @@ def code_hash() -> str:
     global _CODE_HASH
     if _CODE_HASH is None:
         h = hashlib.sha256()
-        for pkg in _PACKAGES:
-            module = sys.modules.get(pkg) or __import__(pkg)
-            root = Path(module.__file__).parent
+        for pkg in h4bench.SUBPACKAGES:
+            root = Path(importlib.import_module(f"h4bench.{pkg}").__file__).parent
             for f in sorted(root.rglob("*.py")) + sorted(root.rglob("*.toml")):
                 h.update(str(f.relative_to(root.parent)).encode())
                 h.update(f.read_bytes())
@@ -249,7 +248,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     try:
         (out / "runs").mkdir(exist_ok=True)
     except OSError as exc:
-        from scenarios.rundir import RunFolderError
+        from h4bench.scenarios.rundir import RunFolderError
 
         raise RunFolderError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from exc
     if fresh:
@@ -322,10 +321,10 @@ def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: 
     """A campaign kind's files: ``widths.png`` (relative widths over the runs), ``report.md`` (``# Scenario
     `name`: title``, the kind's ``facts``, the throughput, one line per method from ``method_line(name, m)``, the
     median relative width table, ``tail``) and ``result.json``, atomically each."""
-    from scenarios.judging import judged_table, plot_coverage
-    from scenarios.report import relative_width_table
-    from scenarios.rundir import write_json
-    from sim.dataset import atomic_write_bytes
+    from h4bench.scenarios.judging import judged_table, plot_coverage
+    from h4bench.scenarios.report import relative_width_table
+    from h4bench.scenarios.rundir import write_json
+    from h4bench.sim.dataset import atomic_write_bytes
 
     out = Path(out)
     plot_relative_widths(result, runs, out / "widths.png")
@@ -380,7 +379,7 @@ def summarise_methods(runs: list[dict]) -> dict:
     """Per method over the runs (:func:`scenarios.judging.summarise_methods`): the claims, misses (and those where
     the bound covered the residual), failed runs, unsound runs, coverage with its Clopper-Pearson interval,
     median width vs hull, median and p90 relative widths (width / |true|), median seconds."""
-    from scenarios.judging import summarise_methods as judged
+    from h4bench.scenarios.judging import summarise_methods as judged
 
     return judged(runs)
 
@@ -426,7 +425,7 @@ def campaign_experiment(spec: dict, index: int, base_seed: int, estimate: bool =
     index's noise shape, and the trajectory of seed ``base_seed + index % campaign.trajectories`` (one per run
     when 0; a few designed trajectories shared by many runs keep campaigns fast, the design being cached).
     Returns (ExperimentRun, noise shape)."""
-    from scenarios.experiment import make_reference, run_experiment
+    from h4bench.scenarios.experiment import make_reference, run_experiment
 
     seed = base_seed + index
     spec_i = campaign_spec(spec, index)

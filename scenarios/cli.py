@@ -224,8 +224,8 @@ def run(
     runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
-    from scenarios.campaign import CampaignInterrupted
-    from scenarios.runner import run_scenario
+    from h4bench.scenarios.campaign import CampaignInterrupted
+    from h4bench.scenarios.runner import run_scenario
 
     _importable_from_cwd(methods)
     try:
@@ -258,7 +258,7 @@ def _importable_from_cwd(methods: str | None) -> None:
 
 def _json_text(result: dict) -> str:
     """The result as strict JSON (non-finite numbers null, as in result.json)."""
-    from scenarios.rundir import finite_json
+    from h4bench.scenarios.rundir import finite_json
 
     return finite_json(result)
 
@@ -266,7 +266,7 @@ def _json_text(result: dict) -> str:
 @app.command()
 def estimators(as_json: bool = typer.Option(False, "--json", help="print the list as JSON")) -> None:
     """List every estimator (built-in, entry point of group h4bench.estimators) and the plugins that fail to load."""
-    from scenarios.judging import describe_estimators
+    from h4bench.scenarios.judging import describe_estimators
 
     found = describe_estimators()
     if as_json:
@@ -283,8 +283,8 @@ def estimators(as_json: bool = typer.Option(False, "--json", help="print the lis
 @app.command()
 def scenarios() -> None:
     """List the scenarios."""
-    from scenarios.registry import load_spec
-    from scenarios.spec import available
+    from h4bench.scenarios.registry import load_spec
+    from h4bench.scenarios.spec import available
 
     for name in available():
         spec = load_spec(name)
@@ -332,7 +332,7 @@ def identify(
     2 bad option, file or data (one error line on stderr);
     3 the data are proven inconsistent with the bound (result.json still written, with the smallest consistent bound).
     """
-    from scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError, check_method
+    from h4bench.scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError, check_method
 
     _importable_from_cwd(method)
     try:
@@ -386,7 +386,7 @@ def identify(
 
 def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
                    decimation, prior, model, out, pairs=None) -> dict:
-    from scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
+    from h4bench.scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
 
     for name, value in (("--prior", prior), ("--model", model)):
         if value is not None:
@@ -394,7 +394,7 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
                               f"{name} {value}")
     if not Path(urdf).is_file():
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
-    from ident.robots.serial import SerialRobot
+    from h4bench.ident.robots.serial import SerialRobot
 
     native: list = []
     try:
@@ -428,7 +428,7 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
 
 def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold",
                  pairs=None) -> dict:
-    from scenarios.identify import OptionError, identify_csv, load_prior, parse_bound, parse_number
+    from h4bench.scenarios.identify import OptionError, identify_csv, load_prior, parse_bound, parse_number
 
     bounds = parse_bound(bound)
     lo, hi = parse_number(prior_lower, "--prior-lower"), parse_number(prior_upper, "--prior-upper")
@@ -449,7 +449,7 @@ def replay(
                              "interface, reachable from other machines)"),
 ) -> None:
     """Open a run's replay in the Rerun viewer (it stops with this command: Ctrl-C, SIGTERM)."""
-    from scenarios.replay import open_viewer
+    from h4bench.scenarios.replay import open_viewer
 
     try:
         open_viewer(file, web=web, bind=bind)
@@ -465,8 +465,8 @@ def controller(
     """Print the joint controller design: gains, bandwidth, margins, step response (python-control)."""
     import numpy as np
 
-    import ident
-    import sim
+    from h4bench import ident
+    from h4bench import sim
 
     try:
         geometry = sim.H4Geometry.from_model(sim.load_model(model))

@@ -12,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-import ident
-import sim
-from ident.processing.filtering import ProcessingSettings
-from ident.processing.processing import Equation, build_equation
-from ident.estimators import registry
-from scenarios import judging
-from scenarios.budget import error_budget
-from scenarios.explain import width_analysis
+from h4bench import ident
+from h4bench import sim
+from h4bench.ident.processing.filtering import ProcessingSettings
+from h4bench.ident.processing.processing import Equation, build_equation
+from h4bench.ident.estimators import registry
+from h4bench.scenarios import judging
+from h4bench.scenarios.budget import error_budget
+from h4bench.scenarios.explain import width_analysis
 
 
 @dataclass
@@ -110,7 +110,7 @@ def make_reference(spec: dict, geometry, seed: int):
     """The exciting trajectory of a spec (trajectories package), seeded: the legacy cond(W) design
     (``trajectory.criterion = "cond"`` with the default limits) or :func:`trajectories.design_excitation`
     (bounded-error criterion ``"h"`` or ``"cond"``, cached by its inputs) under ``trajectory.limits``."""
-    import trajectories
+    from h4bench import trajectories
 
     tr = spec["trajectory"]
     if tr["kind"] != "fourier":
@@ -127,7 +127,7 @@ def make_reference(spec: dict, geometry, seed: int):
 def make_noise(spec: dict):
     """The torque error a spec injects (``noise.shape``; see scenarios.spec.DEFAULTS): a sim.TorqueNoise or a
     sim.noise.TorqueError, each with its rigorous ``bound`` [N m]."""
-    from sim.noise import TorqueError, realistic_drive
+    from h4bench.sim.noise import TorqueError, realistic_drive
 
     nz = spec["noise"]
     if nz["shape"] == "realistic":

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from scenarios.report import PAPER_TABLE1, PAPER_TABLE2
+from h4bench.scenarios.report import PAPER_TABLE1, PAPER_TABLE2
 
 
 def paper_relative_widths(names) -> np.ndarray:
@@ -63,7 +63,7 @@ def width_analysis(W, y, bound, theta_true, prior_lower, prior_upper, names, hul
 
     W (m, p), y (m,), bound scalar or (m,) [N m], theta_true (p,), prior bounds (p,), hull_width (p,) or None.
     """
-    from trajectories import halfwidths
+    from h4bench.trajectories import halfwidths
 
     W = np.asarray(W, dtype=float)
     b_rows = np.broadcast_to(np.asarray(bound, dtype=float), (W.shape[0],))

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.errors import EstimatorError, InconsistentDataError
-from ident.estimators import registry
-from ident.estimators.projection import ellipse_points, projections, zonogon
+from h4bench.ident.errors import EstimatorError, InconsistentDataError
+from h4bench.ident.estimators import registry
+from h4bench.ident.estimators.projection import ellipse_points, projections, zonogon
 
 __all__ = ["EXTRA_METHODS", "drawn_methods", "feasible_set", "identify_projections", "pairs_option", "parse_pairs",
            "plot_feasible_set", "plot_prediction", "polygon_history", "reference_sets"]
@@ -282,8 +282,8 @@ def polygon_history(run, pairs, history: dict, directions: int = 16, refine: int
     or None where the data of that k were not usable), ``"boxes"`` (per pair, per k: (lower (2,), upper (2,)) or None),
     ``"time"``, ``"seconds"}``.
     """
-    from ident.estimators.projection import project_pair
-    from ident.estimators.support import SupportLP
+    from h4bench.ident.estimators.projection import project_pair
+    from h4bench.ident.estimators.support import SupportLP
 
     t0 = time.perf_counter()
     eq, t = run.equation, np.asarray(run.dataset.t, dtype=float)

@@ -25,14 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
-import ident
-import sim
-from ident.errors import EstimatorError
-from ident.estimators import registry
-from ident.processing.filtering import ProcessingSettings
-from ident.processing.processing import BLOCK_SAMPLES, build_equation
-from scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
-from scenarios.spec import DEFAULTS
+from h4bench import ident
+from h4bench import sim
+from h4bench.ident.errors import EstimatorError
+from h4bench.ident.estimators import registry
+from h4bench.ident.processing.filtering import ProcessingSettings
+from h4bench.ident.processing.processing import BLOCK_SAMPLES, build_equation
+from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
+from h4bench.scenarios.spec import DEFAULTS
 
 METHODS = tuple(dict.fromkeys((*registry.BUILTINS, "wls")))  # the built-in box estimators (any the registry resolves works) and WLS
 N_JOINTS = 4
@@ -44,7 +44,7 @@ def check_method(method) -> str:
     registry, entry points or ``package.module:attribute``, :func:`scenarios.judging.parse_methods`); ``wls`` is
     the registry's WLS box plus the %sigma table (``result["wls"]``). ValueError naming the choices otherwise;
     returns the method string."""
-    from scenarios.judging import parse_methods
+    from h4bench.scenarios.judging import parse_methods
 
     try:
         parse_methods(method)
@@ -283,7 +283,7 @@ def read_serial_log(path, n_joints: int) -> tuple[np.ndarray, np.ndarray, float]
     [N m], dt [s] (the mean step, to 12 significant digits). The time must increase uniformly (each step
     within 0.1 % of the median step). Errors are
     :class:`sim.DatasetError` naming the file, the column and the data row."""
-    from sim.csvlog import read_log
+    from h4bench.sim.csvlog import read_log
 
     DatasetError = sim.DatasetError
 
@@ -322,7 +322,7 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     ``cutoff_hz`` [Hz] and ``decimation``. Returns the result dict; data proven inconsistent with the bound give
     ``result["consistent"] = False`` (and the method's ``min_bound``), not an exception.
     """
-    from ident.robots.serial import SerialRobot, default_reach, physical_prior, process
+    from h4bench.ident.robots.serial import SerialRobot, default_reach, physical_prior, process
 
     check_method(method)
     urdf = Path(urdf)
@@ -383,7 +383,7 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
         "prior": {"lower": blo.tolist(), "upper": bhi.tolist(), "standard_lower": lo_s.tolist(),
                   "standard_upper": hi_s.tolist(), "total_mass": M, "urdf_mass": urdf_mass, "reach": r,
                   "rotor_inertia_max": rotor_inertia_max, "offset_fraction": OFFSET_FRACTION,
-                  "source": "ident.robots.serial.physical_prior mapped by the base-parameter matrix"},
+                  "source": "h4bench.ident.robots.serial.physical_prior mapped by the base-parameter matrix"},
         # processed rows [N m]; divided by ||h||_1: the raw-row scalar bound it corresponds to (approximately)
         "min_consistent_bound": t_min, "min_consistent_bound_raw": t_min / eq.gain,
         "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,
@@ -419,7 +419,7 @@ def wls_consistency(W, y, bound, prior, min_bound: float | None = None) -> dict:
 
 def _pairs(pairs, names):
     """``--pairs`` parsed (None: not asked; ``"auto"``: the most coupled), OptionError naming it."""
-    from scenarios.feasible import pairs_option
+    from h4bench.scenarios.feasible import pairs_option
 
     if pairs is None:
         return None
@@ -437,7 +437,7 @@ def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: i
     proven inconsistency is recorded (status ``inconsistent`` with ``min_bound``; ``consistent`` False), then
     ``result.json`` is written into the owned folder ``out``; ``pairs`` (``--pairs``) adds the feasible set's
     projections (``feasible_set.png``, drawn with the hull's box); returns ``result``."""
-    from scenarios import judging
+    from h4bench.scenarios import judging
 
     methods = judging.parse_methods(method)
     groups = np.asarray(joint_of_row, dtype=np.int64)
@@ -469,7 +469,7 @@ def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: i
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         chosen = _pairs(pairs, names)
         if chosen is not None and result.get("consistent") is not False:
-            from scenarios.feasible import identify_projections
+            from h4bench.scenarios.feasible import identify_projections
 
             box = hull.box if hull.status == "ok" else None
             units = ident.PARAMETER_UNITS if tuple(names) == tuple(ident.PARAMETER_NAMES) else None  # the H4's

@@ -38,9 +38,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-import ident
-from ident.estimators import registry
-from ident.numerics.interval import point_matmul, up
+from h4bench import ident
+from h4bench.ident.estimators import registry
+from h4bench.ident.numerics.interval import point_matmul, up
 
 __all__ = ["HULL_RTOL", "HullReference", "Outcome", "clopper_pearson", "describe_estimators", "hull_reference",
            "judge", "parse_methods", "run_method", "run_methods", "summarise_methods"]
@@ -221,7 +221,7 @@ def hull_reference(W, y, bound, prior, hull: ident.Box) -> HullReference:
                     break
             if centre is None:
                 try:
-                    from ident.estimators.hull import chebyshev
+                    from h4bench.ident.estimators.hull import chebyshev
 
                     ch = chebyshev(W, y, b, lo, hi, center=centres[0])
                     c = np.clip(ch.theta, lo, hi)

@@ -17,7 +17,7 @@ import importlib
 import pkgutil
 from types import ModuleType
 
-_PACKAGE = "scenarios.kinds"
+_PACKAGE = "h4bench.scenarios.kinds"
 
 
 def kinds() -> dict[str, ModuleType]:
@@ -57,6 +57,6 @@ def spec_defaults() -> dict:
 
 def load_spec(name_or_path, quick: bool = False) -> dict:
     """A scenario spec with its kind checked against the registry and the kinds' own sections known."""
-    from scenarios.spec import load_spec as _load
+    from h4bench.scenarios.spec import load_spec as _load
 
     return _load(name_or_path, quick=quick, kinds=names(), extra_defaults=spec_defaults())

@@ -72,7 +72,7 @@ class ReplayError(ValueError):
 
 
 def _default_estimator():
-    import ident
+    from h4bench import ident
 
     estimate = getattr(ident, "estimate", None)
     if estimate is None:
@@ -200,7 +200,7 @@ def _bars(geometry) -> list[np.ndarray]:
 def nacelle_strips(geometry, x: np.ndarray) -> np.ndarray:
     """The H of the nacelle as segments (n, 1 + bars, 2, 3) [m] for poses x (n, 4): first the central bar
     from C_first to C_last (it turns with theta), then each lateral bar through its attachment points A_i."""
-    from sim.kinematics import nacelle_points
+    from h4bench.sim.kinematics import nacelle_points
 
     a, dc = nacelle_points(geometry, x)
     bars = _bars(geometry)
@@ -220,7 +220,7 @@ def _reference_pose(run) -> np.ndarray:
     x = getattr(ref, "x", None)
     if x is not None and np.shape(x) == np.shape(ref.q):
         return np.asarray(x, dtype=float)
-    import sim
+    from h4bench import sim
 
     return sim.forward_kinematics(run.geometry, np.asarray(ref.q, dtype=float))
 
@@ -247,7 +247,7 @@ def _send_strips(rec, rr, path: str, t, segments: np.ndarray, colors, radius: fl
 
 
 def _log_scene(rec, rr, run, scene_hz: float) -> None:
-    from sim.kinematics import arm_tips, nacelle_points
+    from h4bench.sim.kinematics import arm_tips, nacelle_points
 
     g, truth, t = run.geometry, run.truth, np.asarray(run.dataset.t, dtype=float)
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -291,7 +291,7 @@ def _log_scene(rec, rr, run, scene_hz: float) -> None:
 
 
 def _log_signals(rec, rr, run) -> None:
-    from ident.processing.filtering import derivatives
+    from h4bench.ident.processing.filtering import derivatives
 
     ds, truth, s = run.dataset, run.truth, run.settings
     t = np.asarray(ds.t, dtype=float)
@@ -402,7 +402,7 @@ def write_replay(run, path, history_points: int = 10, progress=None, *, history:
     ignored); scene_hz : rate of the 3D frames [Hz]; progress : optional callable(stage, done, total).
     The bytes are built in memory and written to a temporary file in the same folder, then ``os.replace``d.
     """
-    from sim.dataset import atomic_write_bytes
+    from h4bench.sim.dataset import atomic_write_bytes
 
     path = Path(path)
     if path.suffix != ".rrd":
@@ -435,12 +435,12 @@ def write_replay(run, path, history_points: int = 10, progress=None, *, history:
         feasible = getattr(run, "feasible", None)
         if feasible and feasible.get("pairs") and "hull" in history["methods"]:
             pairs = [tuple(pj["parameters"]) for pj in feasible["pairs"]]
-            from scenarios.feasible import polygon_history
+            from h4bench.scenarios.feasible import polygon_history
 
             _log_polygons(rec, rr, run, polygon_history(run, pairs, history))
     rec.log("summary", rr.TextDocument(_summary(run, history), media_type=rr.MediaType.MARKDOWN), static=True)
     names = list(run.equation.names)
-    import ident
+    from h4bench import ident
 
     units = list(ident.PARAMETER_UNITS) if len(names) == len(ident.PARAMETER_UNITS) else [""] * len(names)
     hist_methods = [m for m, r in (history or {"methods": {}})["methods"].items() if r["ok"].any()]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.judging import judged_table
+from h4bench.scenarios.judging import judged_table
 
 # The paper's Table 1 (CGSP boxes on the real H4) and Table 2 (WLS, %sigma): Poignet, Ramdani & Vivas,
 # CDC 2003, section 4.2. Fc there is Fs here.
@@ -183,7 +183,7 @@ def heading(result: dict, what: str = "") -> str:
 
 
 def write_paper_report(result: dict, out: Path, extra: str = "") -> None:
-    from sim.dataset import atomic_write_bytes
+    from h4bench.sim.dataset import atomic_write_bytes
 
     text = "\n".join([
         heading(result), "",

@@ -18,7 +18,7 @@ import shutil
 import time
 from pathlib import Path
 
-from sim.dataset import atomic_write_bytes, json_default
+from h4bench.sim.dataset import atomic_write_bytes, json_default
 
 RUNS_DIR = Path("runs")
 MARKER = ".h4bench-run"
@@ -195,7 +195,7 @@ def save_run_files(run, out: Path, progress) -> None:
         run.reference.save(out / "trajectory.npz")
     if run.spec["replay"]["enabled"]:
         progress("replay", 0, 1)
-        from scenarios.replay import write_replay
+        from h4bench.scenarios.replay import write_replay
 
         t0 = time.perf_counter()
         write_replay(run, out / "replay.rrd", history_points=run.spec["replay"]["history_points"])

@@ -7,9 +7,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from scenarios import registry
-from scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
-from scenarios.spec import ScenarioError
+from h4bench.scenarios import registry
+from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
+from h4bench.scenarios.spec import ScenarioError
 
 
 def _noop(stage: str, done: int = 0, total: int = 0) -> None:
@@ -19,7 +19,7 @@ def _noop(stage: str, done: int = 0, total: int = 0) -> None:
 def check_model(path) -> None:
     """Load the H4 model at ``path`` once, before any run (a campaign's workers would each fail on it):
     :class:`sim.ModelError` (a ValueError) names the file and what is wrong."""
-    import sim
+    from h4bench import sim
 
     model = sim.load_model(path)
     sim.H4Geometry.from_model(model)
@@ -42,7 +42,7 @@ def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | 
     """
     spec = registry.load_spec(name, quick=quick)
     if methods is not None:
-        from scenarios.judging import parse_methods
+        from h4bench.scenarios.judging import parse_methods
 
         try:
             spec["estimators"]["methods"] = parse_methods(methods if isinstance(methods, str) else ",".join(methods))

@@ -11,8 +11,8 @@ import copy
 import tomllib
 from pathlib import Path
 
-from ident.errors import EstimatorError
-from ident.estimators import registry
+from h4bench.ident.errors import EstimatorError
+from h4bench.ident.estimators import registry
 
 SPEC_DIR = Path(__file__).resolve().parent
 

@@ -111,7 +111,7 @@ def load(cfg: dict, seed: int) -> Study:
     A new :class:`Study` with ``log``, ``n``, ``q``, ``tau``, ``robot``, ``base``, ``r``, ``blo``, ``bhi``,
     ``flo``, ``fhi``, ``t_abs`` and ``seconds["base_parameters"]``.
     """
-    from ident.robots import tx40
+    from h4bench.ident.robots import tx40
 
     s = Study(cfg=cfg, seed=seed, seconds={})
     s.log = tx40.load_log()
@@ -138,9 +138,9 @@ def process_log(s: Study) -> None:
     ----------
     s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
     """
-    import ident
-    from ident.processing.filtering import decimation_fir
-    from ident.robots.serial import process
+    from h4bench import ident
+    from h4bench.ident.processing.filtering import decimation_fir
+    from h4bench.ident.robots.serial import process
 
     cfg = s.cfg
     t0 = time.perf_counter()
@@ -166,7 +166,7 @@ def fit_wls(s: Study) -> None:
     ----------
     s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
     """
-    import ident
+    from h4bench import ident
 
     t0 = time.perf_counter()
     s.w = ident.wls(s.eq.W, s.eq.y, joints=N_JOINTS, names=s.base.names, joint_of_row=s.eq.joint)
@@ -185,8 +185,8 @@ def consistent_bounds(s: Study) -> None:
     ----------
     s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
     """
-    import ident
-    from ident.estimators.hull import chebyshev
+    from h4bench import ident
+    from h4bench.ident.estimators.hull import chebyshev
 
     eq, eq_rich, prior = s.eq, s.eq_rich, s.prior
     t0 = time.perf_counter()
@@ -210,7 +210,7 @@ def consistent_bounds(s: Study) -> None:
 def _box_entry(s: Study, k: float, box, t0: float) -> tuple[dict, tuple]:
     """The result entry of the hull box at ``k`` x the bound, its held-out interval envelope (rigorous, exact for
     a linear function over a box) widened by the bound, and that envelope's arrays ``(lower, upper, bound)``."""
-    from ident.numerics.interval import point_matvec
+    from h4bench.ident.numerics.interval import point_matvec
 
     eq_ho = s.eq_ho
     lo_e, hi_e = point_matvec(eq_ho.W, box.lower, box.upper)
@@ -244,7 +244,7 @@ def hull_boxes(s: Study) -> None:
     ----------
     s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
     """
-    import ident
+    from h4bench import ident
 
     s.methods, s.boxes, s.envelope = {}, {}, None
     for k in s.cfg["factors"]:
@@ -273,7 +273,7 @@ def polytope_envelope(s: Study) -> None:
     ----------
     s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
     """
-    from ident.robots.serial import prediction_envelope
+    from h4bench.ident.robots.serial import prediction_envelope
 
     if s.envelope is None:
         return
@@ -310,8 +310,8 @@ def relaxed(s: Study) -> None:
     ----------
     s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
     """
-    import ident
-    from ident.estimators.outliers import OutlierBudgetError
+    from h4bench import ident
+    from h4bench.ident.estimators.outliers import OutlierBudgetError
 
     eq, cfg = s.eq, s.cfg
     t0 = time.perf_counter()
@@ -389,7 +389,7 @@ def result_dict(s: Study, seconds_total: dict) -> dict:
         "min_consistent_bound_rich_friction": float(s.t_all_rich),
         "min_consistent_bound_per_joint_rich_friction": s.t_j_rich.tolist(),
         "prior": {"lower": s.blo.tolist(), "upper": s.bhi.tolist(),
-                  "source": "ident.robots.tx40.standard_prior mapped by B"},
+                  "source": "h4bench.ident.robots.tx40.standard_prior mapped by B"},
         "data": {"samples": int(s.n), "identify_samples": int(s.n1), "heldout_samples": int(s.n - s.n1),
                  "rows_identify": len(eq), "rows_heldout": len(s.eq_ho), "dt": s.log.dt, **{
                      k: v for k, v in eq.info.items() if isinstance(v, (int, float, bool))}},

@@ -12,18 +12,18 @@ import sys
 import types
 
 _LAZY = {
-    "sim.kinematics": ("Jacobians", "KinematicsError", "cartesian_motion", "forward_kinematics", "inverse_kinematics",
+    "h4bench.sim.kinematics": ("Jacobians", "KinematicsError", "cartesian_motion", "forward_kinematics", "inverse_kinematics",
                        "jacobian_dot", "jacobians", "singularity_measure"),
-    "sim.model": ("DEFAULT_MODEL_PATH", "H4Geometry", "ModelError", "apply_solver_constants", "load_model"),
-    "sim.truth": ("TRUE_PARAMETER_ORDER", "nacelle_mass_matrix", "true_parameters"),
-    "sim.controller": ("JointController", "VelocityFilter"),
-    "sim.control_design": ("ControllerDesign", "design_joint_controller"),
-    "sim.dataset": ("Dataset", "DatasetError", "GroundTruth", "atomic_write_bytes"),
-    "sim.simulate": ("SimulationSettings", "axis_inertia", "default_controller", "quantise", "simulate"),
-    "sim.validation": ("N_JOINTS", "SimulationError"),
-    "sim.noise": ("ErrorStream", "NOISE_SHAPES", "NoiseModelError", "PrecomputedTorqueError", "TorqueError",
+    "h4bench.sim.model": ("DEFAULT_MODEL_PATH", "H4Geometry", "ModelError", "apply_solver_constants", "load_model"),
+    "h4bench.sim.truth": ("TRUE_PARAMETER_ORDER", "nacelle_mass_matrix", "true_parameters"),
+    "h4bench.sim.controller": ("JointController", "VelocityFilter"),
+    "h4bench.sim.control_design": ("ControllerDesign", "design_joint_controller"),
+    "h4bench.sim.dataset": ("Dataset", "DatasetError", "GroundTruth", "atomic_write_bytes"),
+    "h4bench.sim.simulate": ("SimulationSettings", "axis_inertia", "default_controller", "quantise", "simulate"),
+    "h4bench.sim.validation": ("N_JOINTS", "SimulationError"),
+    "h4bench.sim.noise": ("ErrorStream", "NOISE_SHAPES", "NoiseModelError", "PrecomputedTorqueError", "TorqueError",
                   "TorqueNoise", "realistic_drive"),
-    "sim.variants": ("broken_hypotheses_model", "randomised_model", "unbalanced_arms_model"),
+    "h4bench.sim.variants": ("broken_hypotheses_model", "randomised_model", "unbalanced_arms_model"),
 }
 _MODULE_OF = {name: module for module, names in _LAZY.items() for name in names}
 
@@ -35,10 +35,10 @@ __all__ = sorted(_MODULE_OF)
 
 def __getattr__(name: str):
     if name in _SUBMODULES:  # ``import sim; sim.kinematics.f(...)`` keeps working
-        return importlib.import_module(f"sim.{name}")
+        return importlib.import_module(f"{__name__}.{name}")
     module = _MODULE_OF.get(name)
     if module is None:
-        raise AttributeError(f"module 'sim' has no attribute {name!r}")
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value  # later look-ups skip this function
     return value

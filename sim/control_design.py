@@ -41,8 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from sim.controller import TAU_MAX_DEFAULT, JointController
-from sim.validation import N_JOINTS, axis_array, positive, real
+from h4bench.sim.controller import TAU_MAX_DEFAULT, JointController
+from h4bench.sim.validation import N_JOINTS, axis_array, positive, real
 
 # python-control (and the matplotlib it loads) is imported inside the functions that build or analyse transfer
 # functions, so that importing sim or this module costs neither

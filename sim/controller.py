@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from sim.validation import N_JOINTS, axis_array, joint_vector, positive
+from h4bench.sim.validation import N_JOINTS, axis_array, joint_vector, positive
 
 __all__ = ["TAU_MAX_DEFAULT", "JointController", "VelocityFilter"]
 

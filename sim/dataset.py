@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.csvlog import DatasetError, read_log  # DatasetError lives with the reader (the lower module)
+from h4bench.sim.csvlog import DatasetError, read_log  # DatasetError lives with the reader (the lower module)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.model import H4Geometry, arm_tips, nacelle_points  # the chain points live with the geometry
+from h4bench.sim.model import H4Geometry, arm_tips, nacelle_points  # the chain points live with the geometry
 
 
 class KinematicsError(ValueError):

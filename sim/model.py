@@ -18,7 +18,7 @@ def models_dir() -> Path:
         return checkout
     import importlib.util
 
-    spec = importlib.util.find_spec("h4bench_models")
+    spec = importlib.util.find_spec("h4bench.models")
     if spec is not None and spec.submodule_search_locations:
         return Path(next(iter(spec.submodule_search_locations)))
     return checkout

@@ -34,13 +34,13 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from sim.controller import JointController, VelocityFilter
-from sim.dataset import Dataset, GroundTruth
-from sim.kinematics import _jacobians, forward_kinematics
-from sim.model import NACELLE_JOINTS, H4Geometry
-from sim.noise.shapes import NOISE_SHAPES, PrecomputedTorqueError, TorqueNoise
-from sim.truth import TRUE_PARAMETER_ORDER, true_parameters
-from sim.validation import N_JOINTS, SimulationError
+from h4bench.sim.controller import JointController, VelocityFilter
+from h4bench.sim.dataset import Dataset, GroundTruth
+from h4bench.sim.kinematics import _jacobians, forward_kinematics
+from h4bench.sim.model import NACELLE_JOINTS, H4Geometry
+from h4bench.sim.noise.shapes import NOISE_SHAPES, PrecomputedTorqueError, TorqueNoise
+from h4bench.sim.truth import TRUE_PARAMETER_ORDER, true_parameters
+from h4bench.sim.validation import N_JOINTS, SimulationError
 
 __all__ = ["NOISE_SHAPES", "PrecomputedTorqueError", "SimulationError", "SimulationSettings", "TorqueNoise",
            "axis_inertia", "default_controller", "quantise", "simulate"]
@@ -78,7 +78,7 @@ def axis_inertia(geometry: H4Geometry, theta, x=None) -> np.ndarray:
     """
     theta = np.asarray(theta, dtype=float)
     x = geometry.x_home if x is None else np.asarray(x, dtype=float)
-    from sim.kinematics import inverse_kinematics
+    from h4bench.sim.kinematics import inverse_kinematics
 
     q = inverse_kinematics(geometry, x)
     j = _jacobians(geometry, q[None], x[None]).J[0]
@@ -104,7 +104,7 @@ def default_controller(geometry: H4Geometry, theta_nominal, dt: float = 1e-3, ba
     (ControllerDesign, JointController)
         The design (gains, margins) and the law with its gains.
     """
-    from sim.control_design import design_joint_controller  # noqa: PLC0415 (python-control on use only)
+    from h4bench.sim.control_design import design_joint_controller  # noqa: PLC0415 (python-control on use only)
 
     design = design_joint_controller(axis_inertia(geometry, theta_nominal), np.asarray(theta_nominal)[6:10],
                                      bandwidth_hz=bandwidth_hz, dt=dt, velocity_filter_hz=velocity_filter_hz)

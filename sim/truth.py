@@ -9,7 +9,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from sim.model import FOREARM_RODS, MOTOR_JOINTS, ModelError
+from h4bench.sim.model import FOREARM_RODS, MOTOR_JOINTS, ModelError
 
 # a forearm rod counts as the paper's massless forearm (its mass lumped at A_i on the nacelle) when its centre
 # of mass is its far end and its own inertia is below this [kg m^2] (the MJCF's 1e-12: MuJoCo needs > 0)

@@ -8,7 +8,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim.model import (
+from h4bench.sim.model import (
     DEFAULT_MODEL_PATH,
     MOTOR_JOINTS,
     ModelError,
@@ -104,8 +104,8 @@ def broken_hypotheses_model(arm_com_offset=0.0, forearm_mass: float = 0.0, path=
     if not (np.isfinite(forearm_mass) and forearm_mass >= 0):
         raise ValueError(f"forearm_mass must be a finite number >= 0 [kg], got {forearm_mass!r}")
     base, mxa = unbalanced_arms_model(offsets, path)
-    from sim.model import H4Geometry
-    from sim.truth import true_parameters
+    from h4bench.sim.model import H4Geometry
+    from h4bench.sim.truth import true_parameters
 
     theta = np.concatenate([true_parameters(base), mxa, np.zeros(4)])
     if forearm_mass == 0.0:

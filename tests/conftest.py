@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-import sim
+from h4bench import sim
 
 
 @pytest.fixture(scope="session")
@@ -126,7 +126,7 @@ def cartesian_reference(geometry, seconds=3.0, dt=1e-3, seed=0, amp=(0.06, 0.06,
 
 
 def run_experiment(model, geometry, seconds=3.0, noise=None, seed=0, encoder_counts=20000):
-    import ident
+    from h4bench import ident
 
     ref = cartesian_reference(geometry, seconds=seconds, seed=seed)
     _, controller = sim.default_controller(geometry, NOMINAL)

@@ -18,8 +18,10 @@ from pathlib import Path
 
 import pytest
 
+import h4bench
+
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("sim", "ident", "trajectories", "scenarios")
+PACKAGES = h4bench.SUBPACKAGES
 ORDER = {"sim": 0, "ident": 1, "trajectories": 2, "scenarios": 3}
 
 
@@ -37,14 +39,20 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
+def _short(module: str) -> str:
+    """``h4bench.ident.box`` -> ``ident.box``: the modules are named here by their folder in the checkout."""
+    return module[len("h4bench."):] if module.startswith("h4bench.") else module
+
+
 def _imports(name: str, path: Path) -> list[tuple[str, list[str]]]:
-    """(imported module, imported names) for every import statement, at any depth."""
+    """(imported module, imported names) for every import statement, at any depth; ``from h4bench import
+    ident`` counts as ``import ident``."""
     tree = ast.parse(path.read_text())
     is_pkg = path.name == "__init__.py"
     found = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            found += [(a.name, []) for a in node.names]
+            found += [(_short(a.name), []) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = name.split(".")
@@ -52,7 +60,10 @@ def _imports(name: str, path: Path) -> list[tuple[str, list[str]]]:
                 module = ".".join(base + ([node.module] if node.module else []))
             else:
                 module = node.module or ""
-            found.append((module, [a.name for a in node.names]))
+            if module == "h4bench":
+                found += [(a.name, []) for a in node.names]
+            else:
+                found.append((_short(module), [a.name for a in node.names]))
     return found
 
 
@@ -209,7 +220,22 @@ def test_kinds_are_rooms():
 
 @pytest.mark.parametrize("kind", sorted(m.rsplit(".", 1)[1] for m in MODULES if m.startswith("scenarios.kinds.")))
 def test_every_kind_module_is_registered_with_a_description(kind):
-    from scenarios import registry
+    from h4bench.scenarios import registry
 
     module = registry.get(kind)
     assert callable(module.run) and isinstance(module.DESCRIPTION, str) and module.DESCRIPTION
+
+
+def test_every_file_imports_the_packages_under_h4bench():
+    """Run from the checkout, ``import ident`` would still find the folder (the current directory is on the path),
+    so an import left in the old top-level form would pass here and fail when installed: none may remain."""
+    old = set(h4bench.SUBPACKAGES)
+    found = []
+    for path in sorted(ROOT.rglob("*.py")):
+        if any(part.startswith(".") or part in ("build", "venv") for part in path.relative_to(ROOT).parts):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module] if isinstance(node, ast.ImportFrom) and node.module and not node.level else [])
+            found += [f"{path.relative_to(ROOT)}:{node.lineno} {n}" for n in names if n.split(".")[0] in old]
+    assert found == []

@@ -71,7 +71,7 @@ def test_key_paths_notation():
 def paper_result(tmp_path_factory):
     import json
 
-    from scenarios.runner import run_scenario
+    from h4bench.scenarios.runner import run_scenario
 
     out = tmp_path_factory.mktemp("docs") / "paper"
     run_scenario("paper", quick=True, out=out)
@@ -124,7 +124,7 @@ def test_the_pages_exist_and_the_readme_points_to_them():
 def test_every_registered_estimator_states_its_claims():
     """Each built-in of the estimator registry has a kind, a one-line description and a citation, a statistical
     one its level, and docs/estimators.md names it."""
-    from ident.estimators import registry
+    from h4bench.ident.estimators import registry
 
     page = (DOCS / "estimators.md").read_text()
     assert registry.BUILTINS

@@ -2,13 +2,13 @@
 sample-by-sample checks against the workspace, singularity margin and speed/acceleration/torque limits, and
 bounded-error experiment design (:mod:`trajectories.bounded`, :func:`design_excitation`)."""
 
-from trajectories.bounded import design_criterion, halfwidths, predicted_widths, processed_regressor
-from trajectories.checks import CHECKS, check_trajectory
-from trajectories.excitation import cache_dir, design_excitation
-from trajectories.fourier import fourier_excitation, fourier_trajectory
-from trajectories.limits import NOMINAL_PARAMETERS, InfeasibleTrajectoryError, Limits, nominal_parameters
-from trajectories.timing import TOPPRA_VERSION, slow_down, waypoint_trajectory
-from trajectories.trajectory import Trajectory
+from h4bench.trajectories.bounded import design_criterion, halfwidths, predicted_widths, processed_regressor
+from h4bench.trajectories.checks import CHECKS, check_trajectory
+from h4bench.trajectories.excitation import cache_dir, design_excitation
+from h4bench.trajectories.fourier import fourier_excitation, fourier_trajectory
+from h4bench.trajectories.limits import NOMINAL_PARAMETERS, InfeasibleTrajectoryError, Limits, nominal_parameters
+from h4bench.trajectories.timing import TOPPRA_VERSION, slow_down, waypoint_trajectory
+from h4bench.trajectories.trajectory import Trajectory
 
 __all__ = [
     "CHECKS", "InfeasibleTrajectoryError", "cache_dir", "design_criterion", "design_excitation", "halfwidths",

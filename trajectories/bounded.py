@@ -35,10 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import ident
-from ident.numerics.lp import LPError, LPModel
-from ident.processing.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
-from trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem, grid_regressor
+from h4bench import ident
+from h4bench.ident.numerics.lp import LPError, LPModel
+from h4bench.ident.processing.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
+from h4bench.trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem, grid_regressor
 
 #: Column bound of the half-width LPs: keeps every LP bounded when W is rank-deficient (then h_j = BIG).
 BIG = 1e6

@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import ident
-import sim
+from h4bench import ident
+from h4bench import sim
 # unchecked: per-sample reach ratio without raising; Jd
-from sim.kinematics import ik_unchecked, jacobian_dot_unchecked
-from trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
-from trajectories.trajectory import Trajectory
+from h4bench.sim.kinematics import ik_unchecked, jacobian_dot_unchecked
+from h4bench.trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
+from h4bench.trajectories.trajectory import Trajectory
 
 CHECKS = ("reach", "consistency", "workspace", "joint_range", "singularity", "speed", "acceleration",
           "nacelle_speed", "nacelle_acceleration", "torque")

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-import sim
+from h4bench import sim
 
 #: The optimiser's Coulomb columns use tanh(qd / SIGN_WIDTH) for sign(qd) [rad/s]: sign has no derivative
 #: (a finite-difference step across qd = 0 would jump); samples that slow are excluded or given an interval

@@ -25,13 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-import ident
-import sim
-from trajectories.bounded import as_targets
-from trajectories.checks import check_trajectory
-from trajectories.fourier import CRITERIA, as_processing, fourier_excitation
-from trajectories.limits import Limits, as_limits, as_theta
-from trajectories.trajectory import Trajectory
+from h4bench import ident
+from h4bench import sim
+from h4bench.trajectories.bounded import as_targets
+from h4bench.trajectories.checks import check_trajectory
+from h4bench.trajectories.fourier import CRITERIA, as_processing, fourier_excitation
+from h4bench.trajectories.limits import Limits, as_limits, as_theta
+from h4bench.trajectories.trajectory import Trajectory
 
 CACHE_ENV = "H4BENCH_CACHE"
 #: Source files whose content enters the cache key.

@@ -48,16 +48,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import ident
-import sim
-from ident.processing.filtering import ProcessingSettings
+from h4bench import ident
+from h4bench import sim
+from h4bench.ident.processing.filtering import ProcessingSettings
 # unchecked, vectorised (no re-validation)
-from sim.kinematics import ik_unchecked, jacobian_dot_unchecked, jacobians_unchecked
-from trajectories.bounded import HalfwidthProblem, as_targets
-from trajectories.checks import check_samples
-from trajectories.design import CoefficientProblem
-from trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
-from trajectories.trajectory import Trajectory
+from h4bench.sim.kinematics import ik_unchecked, jacobian_dot_unchecked, jacobians_unchecked
+from h4bench.trajectories.bounded import HalfwidthProblem, as_targets
+from h4bench.trajectories.checks import check_samples
+from h4bench.trajectories.design import CoefficientProblem
+from h4bench.trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
+from h4bench.trajectories.trajectory import Trajectory
 
 SPACES = ("cartesian", "joint")
 CRITERIA = ("cond", "h")

@@ -59,8 +59,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ident import PARAMETER_NAMES
-from ident import NOMINAL_PARAMETERS  # the one definition, in ident.robots.h4 (its source is documented there)
+from h4bench.ident import PARAMETER_NAMES
+from h4bench.ident import NOMINAL_PARAMETERS  # the one definition, in ident.robots.h4 (its source is documented there)
 
 
 def nominal_parameters() -> np.ndarray:

@@ -29,11 +29,11 @@ import toppra.algorithm
 import toppra.constraint
 from toppra.constraint import DiscretizationType, JointTorqueConstraint, LinearConstraint
 
-import ident
-import sim
-from trajectories.checks import TIMING_CHECKS, check_samples
-from trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
-from trajectories.trajectory import Trajectory
+from h4bench import ident
+from h4bench import sim
+from h4bench.trajectories.checks import TIMING_CHECKS, check_samples
+from h4bench.trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
+from h4bench.trajectories.trajectory import Trajectory
 
 TOPPRA_VERSION = importlib.metadata.version("toppra")
 _FV, _FS = slice(6, 10), slice(10, 14)  # positions in ident.PARAMETER_NAMES (checked by a test)
@@ -284,7 +284,7 @@ def slow_down(geometry, traj: Trajectory, limits=None, theta_nominal=None, metho
 
 
 def _uniform(geometry, traj, params):
-    from trajectories.fourier import fourier_trajectory  # noqa: PLC0415
+    from h4bench.trajectories.fourier import fourier_trajectory  # noqa: PLC0415
 
     if "schedule_knots" not in params:
         raise ValueError(f"method='uniform' needs a Fourier trajectory (its coefficients), got kind {traj.kind!r}; "

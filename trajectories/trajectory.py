@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.dataset import atomic_write_bytes
+from h4bench.sim.dataset import atomic_write_bytes
 
 FORMAT = "h4bench.trajectory/1"
 ARRAYS = ("t", "x", "q", "qd", "qdd")

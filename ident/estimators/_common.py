@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident import Box
-from ident.estimators.checks import check_finite, real_array
-from ident.numerics import interval as ia  # noqa: F401  (re-exported for the contractor)
+from h4bench.ident import Box
+from h4bench.ident.estimators.checks import check_finite, real_array
+from h4bench.ident.numerics import interval as ia  # noqa: F401  (re-exported for the contractor)
 
 
 def _real(x, name: str, ndim: int) -> np.ndarray:
@@ -76,7 +76,7 @@ def set_box(method: str, c, rad, lo, hi, names, W, y, b, prior, set_info: dict, 
     """The final box of a set estimator: the set's hull ``c +- rad`` intersected with the prior, its set in
     ``info["set"]``; an empty intersection (only through rounding: the set meets the prior by construction) is an
     inconsistency naming ``method``."""
-    from ident import Box
+    from h4bench.ident import Box
 
     clipped = clip_to_prior(c - rad, c + rad, lo, hi)
     if clipped is None:
@@ -90,7 +90,7 @@ def inconsistent(message: str, W, y, b, prior):
     ``min_bound`` is ``ident.min_consistent_bound`` of the data (zero rows appended when N < p, which does not
     change it); ``scale_lower`` is 1 (the emptiness is the only proof, not its size).
     """
-    from ident import InconsistentDataError, min_consistent_bound
+    from h4bench.ident import InconsistentDataError, min_consistent_bound
 
     N, p = W.shape
     if N < p:

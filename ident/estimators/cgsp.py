@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.numerics.interval import (
+from h4bench.ident.numerics.interval import (
     div,
     dot_error,
     dot_rows,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident.box import Box, default_names
+from h4bench.ident.box import Box, default_names
 
 __all__ = ["check_W_y", "check_bound", "check_finite", "check_prior", "real_array"]
 

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident import Box
-from ident.estimators._common import check_inputs, inconsistent, ia
+from h4bench.ident import Box
+from h4bench.ident.estimators._common import check_inputs, inconsistent, ia
 
 __all__ = ["contract", "contractor"]
 

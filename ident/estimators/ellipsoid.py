@@ -35,8 +35,8 @@ import math
 
 import numpy as np
 
-from ident import Box
-from ident.estimators._common import check_inputs, inconsistent, set_box
+from h4bench.ident import Box
+from h4bench.ident.estimators._common import check_inputs, inconsistent, set_box
 
 __all__ = ["ellipsoid", "strip_update"]
 

@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from ident.estimators.hull import HullResult
+from h4bench.ident.estimators.hull import HullResult
 
 __all__ = ["INFLATION", "Verdict", "decide_and_enclose"]
 

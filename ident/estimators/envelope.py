@@ -19,8 +19,8 @@ import time
 
 import numpy as np
 
-from ident.estimators.support import SupportLP
-from ident.numerics.interval import point_matvec
+from h4bench.ident.estimators.support import SupportLP
+from h4bench.ident.numerics.interval import point_matvec
 
 __all__ = ["envelope_lp", "prediction_envelope"]
 

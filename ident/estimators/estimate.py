@@ -22,13 +22,13 @@ import warnings
 
 import numpy as np
 
-from ident.box import Box, default_names
-from ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
-from ident.estimators import registry
-from ident.estimators.cgsp import cgsp
-from ident.estimators.checks import check_bound, check_prior, check_W_y
-from ident.estimators.enclosure import Verdict, decide_and_enclose
-from ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
+from h4bench.ident.box import Box, default_names
+from h4bench.ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
+from h4bench.ident.estimators import registry
+from h4bench.ident.estimators.cgsp import cgsp
+from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y
+from h4bench.ident.estimators.enclosure import Verdict, decide_and_enclose
+from h4bench.ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
 
 __all__ = [
     "METHODS",

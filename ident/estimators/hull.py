@@ -44,8 +44,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.numerics.interval import down, mid_rad, point_matmul, up
-from ident.numerics.lp import (
+from h4bench.ident.numerics.interval import down, mid_rad, point_matmul, up
+from h4bench.ident.numerics.lp import (
     LPError,
     LPModel,
     SafeBound,

@@ -46,12 +46,12 @@ import time
 
 import numpy as np
 
-from ident.errors import InconsistentDataError
-from ident.estimators.checks import check_finite, check_prior, real_array
-from ident.estimators.estimate import estimate
-from ident.estimators.hull import strip_bounds
-from ident.numerics.lp import LPError, LPModel, column_scale, power2_scale, shifted_safe_bound
-from ident.box import Box
+from h4bench.ident.errors import InconsistentDataError
+from h4bench.ident.estimators.checks import check_finite, check_prior, real_array
+from h4bench.ident.estimators.estimate import estimate
+from h4bench.ident.estimators.hull import strip_bounds
+from h4bench.ident.numerics.lp import LPError, LPModel, column_scale, power2_scale, shifted_safe_bound
+from h4bench.ident.box import Box
 
 __all__ = ["OnlineHull"]
 

@@ -63,13 +63,13 @@ from dataclasses import dataclass
 import highspy
 import numpy as np
 
-from ident.box import Box
-from ident.errors import InconsistentDataError, OutlierBudgetError
-from ident.estimators.checks import check_bound, check_prior, check_W_y
-from ident.estimators.estimate import estimate, min_consistent_bound
-from ident.estimators.hull import strip_bounds
-from ident.numerics.interval import point_matvec, up
-from ident.numerics.lp import LPError, LPModel, check, column_scale, power2_scale, safe_lower_bound
+from h4bench.ident.box import Box
+from h4bench.ident.errors import InconsistentDataError, OutlierBudgetError
+from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y
+from h4bench.ident.estimators.estimate import estimate, min_consistent_bound
+from h4bench.ident.estimators.hull import strip_bounds
+from h4bench.ident.numerics.interval import point_matvec, up
+from h4bench.ident.numerics.lp import LPError, LPModel, check, column_scale, power2_scale, safe_lower_bound
 
 __all__ = ["OutlierBudgetError", "OutlierRows", "detect_outliers", "relaxed_hull"]
 

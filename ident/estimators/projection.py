@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.estimators.support import SupportLP
+from h4bench.ident.estimators.support import SupportLP
 
 __all__ = ["Polygon", "clip_halfplane", "convex_hull", "coupling_scores", "ellipse_points", "most_coupled_pairs",
            "polygon_area", "project_pair", "projections", "vertex_coupling", "zonogon"]

@@ -28,9 +28,9 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ident.box import Box
-from ident.errors import EstimatorError
-from ident.estimators.checks import check_bound, check_prior, check_W_y, real_array
+from h4bench.ident.box import Box
+from h4bench.ident.errors import EstimatorError
+from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y, real_array
 
 __all__ = ["BUILTINS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS", "Available", "Estimator", "available",
            "call", "get", "register"]
@@ -265,35 +265,35 @@ def call(est, W, y, bound, prior, **context) -> Box:
     return _check_result(est, box, W.shape[1], names)
 
 
-register("hull", "ident.estimators.estimate:hull_estimator", kind="guaranteed", rigorous=True,
+register("hull", "h4bench.ident.estimators.estimate:hull_estimator", kind="guaranteed", rigorous=True,
          description="the exact interval hull of the feasible set: 2p linear programs with safe dual bounds",
          citation="Neumaier & Shcherbina, Math. Program. 99 (2004): safe bounds in linear programming")
-register("cgsp", "ident.estimators.estimate:cgsp_estimator", kind="guaranteed", rigorous=True,
+register("cgsp", "h4bench.ident.estimators.estimate:cgsp_estimator", kind="guaranteed", rigorous=True,
          description="the paper's preconditioned interval Gauss-Seidel on Rump's system (an outer box)",
          citation="Poignet, Ramdani & Vivas (CDC 2003, sec. 3); Rump (2002)")
 
 # the reference estimators of the bounded-error literature and the statistical references (their modules carry
 # the same claims as attributes; tests/ident/estimators/test_protocol.py checks the two agree)
-register("ellipsoid", "ident.estimators.ellipsoid:ellipsoid", kind="guaranteed", rigorous=False,
+register("ellipsoid", "h4bench.ident.estimators.ellipsoid:ellipsoid", kind="guaranteed", rigorous=False,
          description="optimal bounding ellipsoid: recursive minimum-volume strip updates (not rigorous in fp)",
          citation="Fogel & Huang, Automatica 18(2):229-238, 1982")
-register("zonotope", "ident.estimators.zonotope:zonotope", kind="guaranteed", rigorous=False,
+register("zonotope", "h4bench.ident.estimators.zonotope:zonotope", kind="guaranteed", rigorous=False,
          description="zonotope by sequential strip intersection (F-radius), order reduction to 3 p generators "
                      "(not rigorous in fp)",
          citation="Alamo, Bravo & Camacho, Automatica 41(6):1035-1043, 2005; Bravo, Alamo & Camacho, IEEE TAC "
                   "51(7):1144-1150, 2006")
-register("parallelotope", "ident.estimators.zonotope:parallelotope", kind="guaranteed", rigorous=False,
+register("parallelotope", "h4bench.ident.estimators.zonotope:parallelotope", kind="guaranteed", rigorous=False,
          description="minimum-volume parallelotope by sequential strip intersection (not rigorous in fp)",
          citation="Chisci, Garulli & Zappa, Automatica 32(7):1049-1055, 1996")
-register("contractor", "ident.estimators.contractor:contractor", kind="guaranteed", rigorous=True,
+register("contractor", "h4bench.ident.estimators.contractor:contractor", kind="guaranteed", rigorous=True,
          description="forward-backward interval contractor on the strips, Jacobi sweeps to a fixed point",
          citation="Jaulin, Kieffer, Didrit & Walter, Applied Interval Analysis, Springer 2001, ch. 4")
-register("ols", "ident.estimators.statistical:ols", kind="statistical", rigorous=False, level=0.95,
+register("ols", "h4bench.ident.estimators.statistical:ols", kind="statistical", rigorous=False, level=0.95,
          description="least squares, 95 % Bonferroni confidence box (Gaussian homoscedastic errors)",
          citation="ordinary least squares; Bonferroni simultaneous t intervals")
-register("wls", "ident.estimators.statistical:wls", kind="statistical", rigorous=False, level=0.95,
+register("wls", "h4bench.ident.estimators.statistical:wls", kind="statistical", rigorous=False, level=0.95,
          description="Gautier's per-joint weighted least squares, 95 % Bonferroni confidence box",
          citation="Gautier & Poignet, Control Engineering Practice 9(12):1361-1372, 2001")
-register("iv", "ident.estimators.statistical:iv", kind="statistical", rigorous=False, level=0.95,
+register("iv", "h4bench.ident.estimators.statistical:iv", kind="statistical", rigorous=False, level=0.95,
          description="instrumental variables (IDIM-IV), 95 % Bonferroni confidence box (asymptotic)",
          citation="Janot, Vandanjon & Gautier, IEEE TCST 22(1):132-145, 2014")

@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from ident import Box
-from ident.estimators._common import check_groups, check_inputs
+from h4bench.ident import Box
+from h4bench.ident.estimators._common import check_groups, check_inputs
 
 __all__ = ["iv", "iv_at", "ols", "ols_at", "wls", "wls_at"]
 

@@ -26,9 +26,9 @@ import time
 
 import numpy as np
 
-from ident.estimators.hull import PRIMAL_SIMPLEX, strip_bounds
-from ident.numerics.interval import mul, sum_down
-from ident.numerics.lp import LPError, LPModel, SafeBound, column_scale, power2_scale
+from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, strip_bounds
+from h4bench.ident.numerics.interval import mul, sum_down
+from h4bench.ident.numerics.lp import LPError, LPModel, SafeBound, column_scale, power2_scale
 
 __all__ = ["SupportLP"]
 

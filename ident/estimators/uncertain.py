@@ -33,14 +33,14 @@ import warnings
 
 import numpy as np
 
-from ident.box import Box
-from ident.errors import InconsistentDataError
-from ident.estimators.enclosure import Verdict, decide_and_enclose
-from ident.estimators.checks import check_bound, check_finite, check_prior, real_array
-from ident.estimators.estimate import least_squares_center
-from ident.estimators.hull import PRIMAL_SIMPLEX, interval_hull, strip_bounds
-from ident.numerics.interval import down, point_matmul, point_matvec, up
-from ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
+from h4bench.ident.box import Box
+from h4bench.ident.errors import InconsistentDataError
+from h4bench.ident.estimators.enclosure import Verdict, decide_and_enclose
+from h4bench.ident.estimators.checks import check_bound, check_finite, check_prior, real_array
+from h4bench.ident.estimators.estimate import least_squares_center
+from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, interval_hull, strip_bounds
+from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
+from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
 
 __all__ = ["uncertain_hull"]
 

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident.box import default_names
-from ident.errors import UnidentifiableError
-from ident.estimators.checks import check_W_y
+from h4bench.ident.box import default_names
+from h4bench.ident.errors import UnidentifiableError
+from h4bench.ident.estimators.checks import check_W_y
 
 __all__ = ["WLSResult", "wls"]
 

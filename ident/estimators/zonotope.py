@@ -43,8 +43,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident import Box
-from ident.estimators._common import check_inputs, inconsistent, set_box
+from h4bench.ident import Box
+from h4bench.ident.estimators._common import check_inputs, inconsistent, set_box
 
 __all__ = ["parallelotope", "zonotope", "zonotope_at"]
 

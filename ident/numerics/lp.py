@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import highspy
 import numpy as np
 
-from ident.errors import LPError, LPFallbackWarning
-from ident.numerics.interval import TINY, U, down, mul, point_matmul, sub, sum_down, up
+from h4bench.ident.errors import LPError, LPFallbackWarning
+from h4bench.ident.numerics.interval import TINY, U, down, mul, point_matmul, sub, sum_down, up
 
 __all__ = [
     "LARGE_ENTRY",

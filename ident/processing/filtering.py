@@ -38,7 +38,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.signal
 
-from ident.validation import as_float_array, check_finite, positive, positive_int
+from h4bench.ident.validation import as_float_array, check_finite, positive, positive_int
 
 N_JOINTS = 4  # the default chain's joint count (the H4's); every function takes `joints` for other robots
 

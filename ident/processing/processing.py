@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.errors import ProcessingError
-from ident.processing.filtering import (N_JOINTS, ProcessingSettings, default_edge_samples, derivatives,
+from h4bench.ident.errors import ProcessingError
+from h4bench.ident.processing.filtering import (N_JOINTS, ProcessingSettings, default_edge_samples, derivatives,
                                         exclude_low_speed, parallel_filter)
-from ident.robots.h4 import parameter_names, regressor
+from h4bench.ident.robots.h4 import parameter_names, regressor
 
 
 @dataclass(frozen=True)

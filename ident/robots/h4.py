@@ -93,7 +93,7 @@ def regressor(geometry, q, qd, qdd, structure: str = "paper", x=None, xdd=None) 
     xdd : optional (n, 4) measured nacelle accelerations used instead of eq. 19 (``J qdd + Jd qd``), e.g. a
     simulator's own, to separate the model from the kinematic differentiation.
     """
-    from sim.kinematics import (arm_tips, forward_kinematics, jacobian_dot_unchecked,  # noqa: PLC0415
+    from h4bench.sim.kinematics import (arm_tips, forward_kinematics, jacobian_dot_unchecked,  # noqa: PLC0415
                                 jacobians_unchecked)
 
     _check_structure(structure)

@@ -49,9 +49,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.signal
 
-from ident.estimators.checks import check_finite, real_array
-from ident.numerics.interval import nonneg_upper, up
-from ident.processing.filtering import (
+from h4bench.ident.estimators.checks import check_finite, real_array
+from h4bench.ident.numerics.interval import nonneg_upper, up
+from h4bench.ident.processing.filtering import (
     ProcessingSettings,
     central_difference,
     default_edge_samples,

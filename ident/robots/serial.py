@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ident.validation import as_float_array, check_finite
+from h4bench.ident.validation import as_float_array, check_finite
 
 __all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters", "default_reach", "physical_prior"]
 
@@ -53,7 +53,7 @@ def _pinocchio():
     try:
         import pinocchio
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("ident.robots.serial needs pinocchio: pip install pin") from exc
+        raise ImportError("h4bench.ident.robots.serial needs pinocchio: pip install pin") from exc
     return pinocchio
 
 
@@ -487,7 +487,7 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
     The chain's functions work on any number of joints (column by column), so all nj joints go through one
     call of each.
     """
-    from ident.processing.filtering import (
+    from h4bench.ident.processing.filtering import (
         decimation_fir,
         default_edge_samples,
         derivatives,
@@ -551,6 +551,6 @@ def prediction_envelope(W, y, bound, lower, upper, W_new, *, center=None, lp_tol
     center : (p,) point near S (LP origin; default least squares). Returns (lo (k,), hi (k,), info
     {'lp_solves', 'lp_failures', 'seconds'}).
     """
-    from ident.estimators.envelope import envelope_lp
+    from h4bench.ident.estimators.envelope import envelope_lp
 
     return envelope_lp(W, y, bound, lower, upper, W_new, center=center, lp_tol=lp_tol)

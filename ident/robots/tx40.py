@@ -27,7 +27,7 @@ def _data_dir() -> Path:
         return checkout
     import importlib.util
 
-    spec = importlib.util.find_spec("h4bench_data")
+    spec = importlib.util.find_spec("h4bench.data")
     if spec is not None and spec.submodule_search_locations:
         return Path(next(iter(spec.submodule_search_locations))) / "tx40"
     return checkout
@@ -127,7 +127,7 @@ def urdf_path() -> Path:
 def robot(**options):
     """The TX40's :class:`ident.robots.serial.SerialRobot` (friction, rotor inertia, offsets, coupled wrist (4, 5));
     ``options`` override the keyword arguments of SerialRobot."""
-    from ident.robots.serial import SerialRobot
+    from h4bench.ident.robots.serial import SerialRobot
 
     kw = {"coupled_wrist": COUPLING, **options}
     return SerialRobot(urdf_path(), **kw)
@@ -153,7 +153,7 @@ def standard_prior(robot) -> tuple[np.ndarray, np.ndarray]:
     E_6 / V_6``, ``fsm <= E_6``. Wide on purpose: it only excludes the unphysical. This is
     :func:`ident.robots.serial.physical_prior` with M, r, J, the ratios and the offset fraction 0.2 above.
     """
-    from ident.robots.serial import physical_prior
+    from h4bench.ident.robots.serial import physical_prior
 
     return physical_prior(robot, ARM_MASS, REACH, rotor_inertia_max=MOTOR_INERTIA_MAX, ratios=RATIOS,
                           offset_fraction=0.2)

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from scenarios import report
-from scenarios.campaign import campaign_experiment, check_same_campaign, provenance, run_many, summarise, write_outputs
-from scenarios.rundir import OwnedFolder, save_run_files, write_json
-from scenarios.spec import ScenarioError
+from h4bench.scenarios import report
+from h4bench.scenarios.campaign import campaign_experiment, check_same_campaign, provenance, run_many, summarise, write_outputs
+from h4bench.scenarios.rundir import OwnedFolder, save_run_files, write_json
+from h4bench.scenarios.spec import ScenarioError
 
 DESCRIPTION = "Monte Carlo over seeds, noise shapes, trajectories and true parameters: is the truth always enclosed?"
 RESUMABLE = True

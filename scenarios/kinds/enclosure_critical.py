@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.numerics.interval import down, point_matmul, up
-from scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
-from scenarios.experiment import estimate_boxes
-from scenarios.spec import ScenarioError
+from h4bench.ident.numerics.interval import down, point_matmul, up
+from h4bench.scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
+from h4bench.scenarios.experiment import estimate_boxes
+from h4bench.scenarios.spec import ScenarioError
 
 DESCRIPTION = "row bounds = each row's own oracle residual, rounded outward: a tiny feasible set, misses show rigour bugs"
 RESUMABLE = True

@@ -12,16 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
-import ident
-import sim
-from ident.estimators.outliers import METHODS as OUTLIER_METHODS
-from ident.estimators.outliers import OutlierBudgetError, relaxed_hull
-from ident.processing.processing import build_equation
-from scenarios import report
-from scenarios.experiment import ExperimentRun, estimate_hull, run_experiment
-from scenarios.rundir import save_run_files, sim_progress
-from scenarios.spec import ScenarioError
-from sim.dataset import atomic_write_bytes
+from h4bench import ident
+from h4bench import sim
+from h4bench.ident.estimators.outliers import METHODS as OUTLIER_METHODS
+from h4bench.ident.estimators.outliers import OutlierBudgetError, relaxed_hull
+from h4bench.ident.processing.processing import build_equation
+from h4bench.scenarios import report
+from h4bench.scenarios.experiment import ExperimentRun, estimate_hull, run_experiment
+from h4bench.scenarios.rundir import save_run_files, sim_progress
+from h4bench.scenarios.spec import ScenarioError
+from h4bench.sim.dataset import atomic_write_bytes
 
 DESCRIPTION = "torque spikes: the plain hull is empty, the q-relaxed hull encloses the truth and proves the outlier rows"
 

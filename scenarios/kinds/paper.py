@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios import report
-from scenarios.experiment import run_experiment
-from scenarios.rundir import save_run_files, sim_progress
+from h4bench.scenarios import report
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.rundir import save_run_files, sim_progress
 
 DESCRIPTION = "the paper's Table 1 (boxes) and Table 2 (WLS) beside the truth"
 
@@ -60,9 +60,9 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
 
 def feasible_set(run_, out: Path) -> dict:
     """The projections of the run's feasible set, the methods' sets beside them, ``feasible_set.png``."""
-    from ident.estimators import registry
-    from scenarios.feasible import drawn_methods, parse_pairs, plot_feasible_set, reference_sets
-    from scenarios.feasible import feasible_set as project
+    from h4bench.ident.estimators import registry
+    from h4bench.scenarios.feasible import drawn_methods, parse_pairs, plot_feasible_set, reference_sets
+    from h4bench.scenarios.feasible import feasible_set as project
 
     cfg, eq = run_.spec["feasible"], run_.equation
     names = list(eq.names)
@@ -75,7 +75,7 @@ def feasible_set(run_, out: Path) -> dict:
                                             groups=np.asarray(eq.joint, dtype=np.int64))
     sets = {m: sets[m] for m in methods if m in sets}
     kinds = {m: registry.get(m).kind for m in sets}
-    from ident import parameter_units
+    from h4bench.ident import parameter_units
 
     plot_feasible_set(polys, sets, run_.theta_true, out / "feasible_set.png",
                       units=parameter_units(run_.spec["structure"]["regressor"]), kinds=kinds, prior=run_.prior)
@@ -113,9 +113,9 @@ def held_out_prediction(run_, seed: int, out: Path, progress=None, arrays: dict 
 
     arrays : a dict that receives the held-out rows and envelopes (``W``, ``y``, ``bound``, ``polytope``
     ``(lo, hi)``, ``box`` ``(lo, hi)``) when given. Returns the ``prediction`` entry of ``result.json``."""
-    from ident.estimators.envelope import envelope_lp
-    from ident.numerics.interval import down, point_matvec, up
-    from scenarios.feasible import plot_prediction
+    from h4bench.ident.estimators.envelope import envelope_lp
+    from h4bench.ident.numerics.interval import down, point_matvec, up
+    from h4bench.scenarios.feasible import plot_prediction
 
     cfg = run_.spec["prediction"]
     t0 = time.perf_counter()

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios import judging, report
-from scenarios.experiment import ExperimentRun, estimate_boxes, run_experiment
-from scenarios.rundir import save_run_files, sim_progress
-from sim.dataset import atomic_write_bytes
+from h4bench.scenarios import judging, report
+from h4bench.scenarios.experiment import ExperimentRun, estimate_boxes, run_experiment
+from h4bench.scenarios.rundir import save_run_files, sim_progress
+from h4bench.sim.dataset import atomic_write_bytes
 
 DESCRIPTION = "the assumed bound against the posterior widths (hull and cgsp)"
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-import sim
-from scenarios import report
-from scenarios.experiment import run_experiment
-from scenarios.rundir import save_run_files, sim_progress
-from sim.dataset import atomic_write_bytes
+from h4bench import sim
+from h4bench.scenarios import report
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.rundir import save_run_files, sim_progress
+from h4bench.sim.dataset import atomic_write_bytes
 
 DESCRIPTION = "unbalanced arms and heavy forearms: the paper's structure against the extended one"
 

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios import tx40_report, tx40_steps
+from h4bench.scenarios import tx40_report, tx40_steps
 
 DESCRIPTION = "real Staubli TX40 log: WLS, min consistent bound, hull boxes, q-relaxed outliers, held-out envelope"
 
@@ -62,7 +62,7 @@ SPEC_DEFAULTS = {
 
 
 def _check(cfg: dict) -> None:
-    from scenarios.spec import ScenarioError
+    from h4bench.scenarios.spec import ScenarioError
 
     if not 0.2 <= cfg["identify_fraction"] <= 0.9:
         raise ScenarioError(f"tx40.identify_fraction must be in [0.2, 0.9], got {cfg['identify_fraction']!r}")
@@ -127,8 +127,8 @@ def judge_estimators(methods, result: dict, art: dict) -> dict | None:
     """The spec's estimators (``[estimators] methods`` or ``--methods``) side by side at the envelope's bound
     factor (else the first hull's), the exact hull as reference (:mod:`scenarios.judging`): no truth, so
     ``enclosed`` is null; the narrower-than-hull check runs. None when no hull box was obtained."""
-    from ident import Box
-    from scenarios import judging
+    from h4bench.ident import Box
+    from h4bench.scenarios import judging
 
     env = art.get("envelope")
     name = env["name"] if env is not None else next(iter(art["boxes"]), None)
@@ -147,7 +147,7 @@ def judge_estimators(methods, result: dict, art: dict) -> dict | None:
 
 def judged_text(result: dict) -> str:
     """The report's side-by-side section of :func:`judge_estimators`."""
-    from scenarios.judging import judged_table
+    from h4bench.scenarios.judging import judged_table
 
     j = result.get("estimators")
     if not j:

@@ -12,15 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-import ident
-import sim
-from ident.estimators.uncertain import uncertain_hull
-from ident.robots.h4_interval import interval_equation, regressor_distortion
-from scenarios import report
-from scenarios.experiment import estimate_hull, run_experiment
-from scenarios.rundir import save_run_files, sim_progress
-from scenarios.spec import ScenarioError
-from sim.dataset import atomic_write_bytes
+from h4bench import ident
+from h4bench import sim
+from h4bench.ident.estimators.uncertain import uncertain_hull
+from h4bench.ident.robots.h4_interval import interval_equation, regressor_distortion
+from h4bench.scenarios import report
+from h4bench.scenarios.experiment import estimate_hull, run_experiment
+from h4bench.scenarios.rundir import save_run_files, sim_progress
+from h4bench.scenarios.spec import ScenarioError
+from h4bench.sim.dataset import atomic_write_bytes
 
 DESCRIPTION = "quantisation and filtering in the regressor: the interval-regressor (Oettli-Prager) hull"
 

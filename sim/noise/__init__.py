@@ -49,7 +49,7 @@ protocol, :class:`ErrorStream`), :mod:`sim.noise.model` (the sum :class:`TorqueE
 ``noise.shape``, realised by the components). Every public name is importable from here.
 """
 
-from sim.noise.components import (
+from h4bench.sim.noise.components import (
     DRIFT_KINDS,
     GAIN_MODES,
     TORQUE_LIMIT,
@@ -63,9 +63,9 @@ from sim.noise.components import (
     Square,
     Uniform,
 )
-from sim.noise.model import LOG_LSB, REALISTIC_DRIVE_SHARES, RIPPLE_ORDERS, RIPPLE_WEIGHTS, TorqueError, realistic_drive
-from sim.noise.shapes import NOISE_SHAPES, PrecomputedTorqueError, TorqueNoise
-from sim.noise.stream import ErrorStream
+from h4bench.sim.noise.model import LOG_LSB, REALISTIC_DRIVE_SHARES, RIPPLE_ORDERS, RIPPLE_WEIGHTS, TorqueError, realistic_drive
+from h4bench.sim.noise.shapes import NOISE_SHAPES, PrecomputedTorqueError, TorqueNoise
+from h4bench.sim.noise.stream import ErrorStream
 
 __all__ = [
     "DRIFT_KINDS",

@@ -14,7 +14,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sim.validation import N_JOINTS
+from h4bench.sim.validation import N_JOINTS
 
 __all__ = [
     "DRIFT_KINDS",

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from sim.noise.components import (
+from h4bench.sim.noise.components import (
     _COMPONENTS,
     _PRECOMPUTED,
     TORQUE_LIMIT,
@@ -22,8 +22,8 @@ from sim.noise.components import (
     _real,
     _round_up_sum,
 )
-from sim.noise.stream import ErrorStream
-from sim.validation import N_JOINTS
+from h4bench.sim.noise.stream import ErrorStream
+from h4bench.sim.validation import N_JOINTS
 
 __all__ = ["LOG_LSB", "REALISTIC_DRIVE_SHARES", "RIPPLE_ORDERS", "RIPPLE_WEIGHTS", "TorqueError", "from_spec",
            "realistic_drive"]

@@ -13,8 +13,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from sim.noise.components import Sine, Square, Uniform
-from sim.validation import N_JOINTS, SimulationError
+from h4bench.sim.noise.components import Sine, Square, Uniform
+from h4bench.sim.validation import N_JOINTS, SimulationError
 
 __all__ = ["NOISE_SHAPES", "PrecomputedTorqueError", "TorqueNoise"]
 

@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from sim.noise.components import NoiseModelError
-from sim.validation import N_JOINTS, as_float_array
+from h4bench.sim.noise.components import NoiseModelError
+from h4bench.sim.validation import N_JOINTS, as_float_array
 
 __all__ = ["ErrorStream"]
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident.estimators import registry
+from h4bench.ident.estimators import registry
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
 

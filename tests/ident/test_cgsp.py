@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from flint import fmpq, fmpq_mat
 
-import ident
-from ident.estimators.cgsp import approximate_gram_inverse, cgsp, cgsp_dense
-from ident.estimators.hull import strip_bounds
-from ident.numerics.interval import point_matvec, sub
+from h4bench import ident
+from h4bench.ident.estimators.cgsp import approximate_gram_inverse, cgsp, cgsp_dense
+from h4bench.ident.estimators.hull import strip_bounds
+from h4bench.ident.numerics.interval import point_matvec, sub
 
 
 def q(x: float) -> fmpq:

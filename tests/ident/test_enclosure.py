@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import ident
-from ident.estimators.enclosure import INFLATION, Verdict, decide_and_enclose
-from ident.estimators.hull import HullResult
+from h4bench import ident
+from h4bench.ident.estimators.enclosure import INFLATION, Verdict, decide_and_enclose
+from h4bench.ident.estimators.hull import HullResult
 
 LO, HI = np.zeros(2), np.ones(2)
 

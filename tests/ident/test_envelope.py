@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-import ident
-from ident.estimators.envelope import envelope_lp, prediction_envelope
+from h4bench import ident
+from h4bench.ident.estimators.envelope import envelope_lp, prediction_envelope
 
 
 def _problem(seed, m=400, p=5):

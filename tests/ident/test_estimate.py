@@ -1,4 +1,4 @@
-"""ident.estimate / ident.min_consistent_bound: enclosure of the truth, inconsistency, identifiability and
+"""h4bench.ident.estimate / ident.min_consistent_bound: enclosure of the truth, inconsistency, identifiability and
 input validation. Oracles: the true parameter vector of synthetic data, scipy's linprog (naive Chebyshev
 fit on all rows), and the equivalence of per-row bounds with row scaling."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-import ident
-from ident import PARAMETER_NAMES, Box
+from h4bench import ident
+from h4bench.ident import PARAMETER_NAMES, Box
 
 METHODS = ("hull", "cgsp")
 
@@ -224,6 +224,10 @@ def test_estimators_import_neither_sim_nor_mujoco():
     for name in ("numerics/interval", "estimators/hull", "estimators/cgsp", "estimators/wls", "estimators/estimate",
                  "numerics/lp"):
         tree = ast.parse((root / f"{name}.py").read_text())
-        modules = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-        modules |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        modules = {a.name.removeprefix("h4bench.").split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
+                   for a in n.names}
+        modules |= {n.module.removeprefix("h4bench.").split(".")[0] for n in ast.walk(tree)
+                    if isinstance(n, ast.ImportFrom) and n.module}
+        modules |= {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module == "h4bench"
+                    for a in n.names}
         assert not modules & {"sim", "mujoco"}, name

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ident.processing.filtering import (
+from h4bench.ident.processing.filtering import (
     DEFAULT_TORQUE_TIMING,
     Derivatives,
     FilteredEquation,

@@ -15,8 +15,8 @@ import pytest
 from flint import fmpq, fmpq_mat
 from scipy.optimize import linprog
 
-import ident
-from ident.estimators.hull import chebyshev, interval_hull, safe_lower_bound, strip_bounds
+from h4bench import ident
+from h4bench.ident.estimators.hull import chebyshev, interval_hull, safe_lower_bound, strip_bounds
 from tests.conftest import bounded_noise_problem
 
 

@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from ident.numerics import interval as iv
-from ident.numerics.interval import Interval
+from h4bench.ident.numerics import interval as iv
+from h4bench.ident.numerics.interval import Interval
 
 FINITE = st.floats(min_value=-1e100, max_value=1e100, allow_nan=False, allow_infinity=False)
 # mixes of scales make cancellation likely (1e16 + 1 - 1e16) and exercise the dot-product error bounds

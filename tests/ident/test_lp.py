@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from ident.numerics.lp import LPError, LPModel, SafeBound, SafeBounds, column_scale, power2_scale, safe_lower_bound
+from h4bench.ident.numerics.lp import LPError, LPModel, SafeBound, SafeBounds, column_scale, power2_scale, safe_lower_bound
 
 
 def _random_lp(rng, m, n):

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-import ident
-from ident.estimators.online import OnlineHull
+from h4bench import ident
+from h4bench.ident.estimators.online import OnlineHull
 
 TOL = 2e-7  # 1e-7 of the prior width (2)
 
@@ -137,6 +137,10 @@ def test_new_estimators_import_neither_sim_nor_mujoco():
     root = Path(ident.__file__).parent
     for name in ("outliers", "uncertain", "online"):
         tree = ast.parse((root / "estimators" / f"{name}.py").read_text())
-        modules = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-        modules |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        modules = {a.name.removeprefix("h4bench.").split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
+                   for a in n.names}
+        modules |= {n.module.removeprefix("h4bench.").split(".")[0] for n in ast.walk(tree)
+                    if isinstance(n, ast.ImportFrom) and n.module}
+        modules |= {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module == "h4bench"
+                    for a in n.names}
         assert not modules & {"sim", "mujoco"}, name

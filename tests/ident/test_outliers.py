@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-import ident
-from ident.estimators.outliers import OutlierBudgetError, detect_outliers, relaxed_hull
+from h4bench import ident
+from h4bench.ident.estimators.outliers import OutlierBudgetError, detect_outliers, relaxed_hull
 from tests.conftest import bounded_noise_problem
 
 

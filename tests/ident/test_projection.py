@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-import ident
-from ident.estimators import projection as P
-from ident.estimators.support import SupportLP
+from h4bench import ident
+from h4bench.ident.estimators import projection as P
+from h4bench.ident.estimators.support import SupportLP
 
 
 def _problem(seed, m=300, p=5):

@@ -8,8 +8,8 @@ import textwrap
 import numpy as np
 import pytest
 
-import ident
-from ident.estimators import registry
+from h4bench import ident
+from h4bench.ident.estimators import registry
 
 
 def _problem(seed=0, m=60, p=3):
@@ -22,7 +22,7 @@ def _problem(seed=0, m=60, p=3):
 
 PLUGIN_SOURCE = '''
 import numpy as np
-import ident
+from h4bench import ident
 
 def estimator(W, y, bound, prior):
     """The prior itself: a valid (trivial) outer box."""
@@ -194,8 +194,8 @@ def test_context_keywords_are_passed_only_when_accepted():
 
 
 def test_the_spec_check_and_identify_accept_what_the_registry_resolves(tmp_path, monkeypatch):
-    from scenarios.identify import check_method
-    from scenarios.spec import ScenarioError, load_spec
+    from h4bench.scenarios.identify import check_method
+    from h4bench.scenarios.spec import ScenarioError, load_spec
 
     (tmp_path / "h4plugin_spec.py").write_text(PLUGIN_SOURCE)
     monkeypatch.syspath_prepend(str(tmp_path))

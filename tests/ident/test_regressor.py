@@ -9,8 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
-import ident
-import sim
+from h4bench import ident
+from h4bench import sim
 from tests.conftest import (
     friction_saturated,
     random_workspace_poses,
@@ -71,7 +71,7 @@ def test_papers_kinematic_acceleration_is_exact_on_the_paper_trajectory(model, g
     exact motor states matches MuJoCo's applied torques to < 1e-5 N m where friction is saturated, and the
     loops stay closed to < 1e-8 m. The optimised paper trajectory: tests/scenarios (slow) and the report's
     error budget."""
-    import trajectories
+    from h4bench import trajectories
 
     ref = trajectories.fourier_excitation(geometry, duration=10.0, seed=0, optimise=False)
     cut = ref.t < 3.0
@@ -125,7 +125,7 @@ def test_nacelle_columns_against_euler_lagrange(geometry):
 
 def test_forearm_rod_columns_against_euler_lagrange(geometry):
     """mf_i column: a uniform rod minus its two lumped halves has T = -(m/12) |d/dt (A_i - B_i)|^2."""
-    from sim.kinematics import arm_tips, nacelle_points
+    from h4bench.sim.kinematics import arm_tips, nacelle_points
 
     rng = np.random.default_rng(3)
     x = random_workspace_poses(rng, 1)[0]

@@ -1,4 +1,4 @@
-"""ident.robots.serial against independent oracles: pinocchio's inverse dynamics (rnea) with random standard parameters,
+"""h4bench.ident.robots.serial against independent oracles: pinocchio's inverse dynamics (rnea) with random standard parameters,
 hand-written friction / rotor / offset / coupled-wrist formulas, numpy's SVD rank, scipy's FIR filtering."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 
 pin = pytest.importorskip("pinocchio")
 
-from ident.robots import tx40
-from ident.robots.serial import SerialRobot, base_parameters, process, rich_friction_columns
+from h4bench.ident.robots import tx40
+from h4bench.ident.robots.serial import SerialRobot, base_parameters, process, rich_friction_columns
 
 THREE_LINK_URDF = """<?xml version="1.0"?>
 <robot name="three">
@@ -173,7 +173,7 @@ def test_box_from_standard_encloses_random_images(tx40_robot):
 def test_process_matches_scipy_filtering(tx40_robot):
     """The 6-joint processing (groups of 4 joints through ident.processing.filtering) against filtering each joint's
     column directly with numpy.convolve, and the bound against ||h||_1 times the raw bound."""
-    from ident.processing.filtering import decimation_fir
+    from h4bench.ident.processing.filtering import decimation_fir
 
     log = tx40.load_log()
     base = tx40_robot.base()
@@ -227,8 +227,8 @@ def test_prediction_envelope_against_linprog():
     """Endpoints enclose scipy's LP optimum (outer) and are tight to 1e-7 relative; inside the box evaluation."""
     from scipy.optimize import linprog
 
-    from ident.numerics.interval import point_matvec
-    from ident.robots.serial import prediction_envelope
+    from h4bench.ident.numerics.interval import point_matvec
+    from h4bench.ident.robots.serial import prediction_envelope
 
     rng = np.random.default_rng(8)
     m, p = 300, 7

@@ -9,7 +9,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from ident.robots import tx40
+from h4bench.ident.robots import tx40
 
 pytest.importorskip("pinocchio")
 
@@ -77,7 +77,7 @@ def test_least_squares_fit_agrees_with_figaroh():
     """Same processed states and torques: FIGAROH's regressor (its coupling parametrisation) and ours span the
     same columns, so the least-squares torque fits agree, and so do the parameters both parametrise alike."""
     pytest.importorskip("figaroh")
-    from ident.processing.filtering import derivatives
+    from h4bench.ident.processing.filtering import derivatives
 
     robot = tx40.robot()
     base = robot.base()
@@ -115,7 +115,7 @@ def test_tx40_study_quick_invariants():
     box, certain outliers infeasible over the relaxed box by linprog, coverage recomputed from the arrays."""
     from scipy.optimize import linprog
 
-    from scenarios.kinds.tx40 import SPEC_DEFAULTS, run_tx40
+    from h4bench.scenarios.kinds.tx40 import SPEC_DEFAULTS, run_tx40
 
     cfg = {**SPEC_DEFAULTS["tx40"], "decimation": 200, "factors": [1.5], "outlier_q": 2}
     result, art = run_tx40(cfg, 0)

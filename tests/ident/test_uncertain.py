@@ -22,10 +22,10 @@ import pytest
 import scipy.signal
 from scipy.optimize import linprog
 
-import ident
-from ident.processing.filtering import ProcessingSettings, default_edge_samples, parallel_filter
-from ident.estimators.uncertain import uncertain_hull
-from ident.robots.h4_interval import (
+from h4bench import ident
+from h4bench.ident.processing.filtering import ProcessingSettings, default_edge_samples, parallel_filter
+from h4bench.ident.estimators.uncertain import uncertain_hull
+from h4bench.ident.robots.h4_interval import (
     Distortion,
     encoder_radii,
     filter_interval,
@@ -267,12 +267,12 @@ def test_interval_equation_encloses_a_noise_free_recording(geometry, exact_recor
     def fn(q, qd, qdd):
         return ident.regressor(geometry, q, qd, qdd)
 
-    from ident.robots.h4_interval import regressor_distortion
+    from h4bench.ident.robots.h4_interval import regressor_distortion
 
     dist = regressor_distortion(fn, rec["q"], rec["qd"], rec["qdd"], settings)
     ieq = interval_equation(fn, rec["q"], rec["tau"], 1e-3, settings, counts_per_turn=None,
                             distortion=dist, sign_band=0.05)
-    import sim
+    from h4bench import sim
 
     theta = sim.true_parameters(sim.load_model())
     lo_v = (ieq.Wc - ieq.D) @ theta - ieq.y - ieq.bound

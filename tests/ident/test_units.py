@@ -32,9 +32,9 @@ from flint import fmpq
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import ident
-from ident.estimators.online import OnlineHull
-from ident.estimators.uncertain import uncertain_hull
+from h4bench import ident
+from h4bench.ident.estimators.online import OnlineHull
+from h4bench.ident.estimators.uncertain import uncertain_hull
 
 TIGHT = 2.0**-44
 
@@ -255,11 +255,11 @@ def test_no_solver_output_reaches_stdout():
     models are made by four threads at once (the redirection around the first construction is locked)."""
     code = (
         "import threading\n"
-        "import numpy as np, ident\n"
-        "from ident.numerics.lp import new_highs\n"
+        "import numpy as np\nfrom h4bench import ident\n"
+        "from h4bench.ident.numerics.lp import new_highs\n"
         "ts = [threading.Thread(target=new_highs, args=(1e-9,)) for _ in range(4)]\n"
         "[t.start() for t in ts]; [t.join() for t in ts]\n"
-        "from ident.estimators.online import OnlineHull\n"
+        "from h4bench.ident.estimators.online import OnlineHull\n"
         "rng = np.random.default_rng(0); W = rng.standard_normal((60, 3)); y = W @ np.ones(3)\n"
         "P = (np.zeros(3), 2 * np.ones(3))\n"
         "ident.estimate(W, y, 0.1, P); ident.estimate(W, y, 0.1, P, method='cgsp')\n"
@@ -301,7 +301,7 @@ def test_highs_rejects_a_block_with_a_huge_entry_and_the_helper_says_so():
     """The cause of silently missing rows: addRows returns kError for an entry >= 1e15 and adds nothing."""
     import highspy
 
-    from ident.numerics.lp import LPError, add_dense_rows, new_highs
+    from h4bench.ident.numerics.lp import LPError, add_dense_rows, new_highs
 
     h = new_highs(1e-9)
     h.addVars(2, np.zeros(2), np.ones(2))
@@ -314,8 +314,8 @@ def test_highs_rejects_a_block_with_a_huge_entry_and_the_helper_says_so():
 
 @pytest.mark.parametrize("fail_at", [1, 2])  # the first block of rows, or a block added by constraint generation
 def test_a_model_highs_rejects_gives_a_coarser_box_with_a_warning_never_a_tighter_one(monkeypatch, fail_at):
-    import ident.numerics.lp as lp_module  # the LP core adds every row block of the hull's models
-    from ident.numerics.lp import LPError, LPFallbackWarning
+    import h4bench.ident.numerics.lp as lp_module  # the LP core adds every row block of the hull's models
+    from h4bench.ident.numerics.lp import LPError, LPFallbackWarning
 
     rng = np.random.default_rng(5)
     W = rng.standard_normal((2000, 4))  # more rows than the first working set: constraint generation adds rows
@@ -339,9 +339,9 @@ def test_a_model_highs_rejects_gives_a_coarser_box_with_a_warning_never_a_tighte
 
 
 def test_an_unsolvable_consistency_lp_is_a_warning_not_a_crash(monkeypatch):
-    from ident.numerics.lp import LPError, LPFallbackWarning
+    from h4bench.ident.numerics.lp import LPError, LPFallbackWarning
 
-    estimate_module = sys.modules["ident.estimators.estimate"]  # the package re-exports the function under the same name
+    estimate_module = sys.modules["h4bench.ident.estimators.estimate"]  # the package re-exports the function under the same name
 
     def broken(*args, **kwargs):
         raise LPError("HiGHS failed on the Chebyshev LP: Unknown (test)")

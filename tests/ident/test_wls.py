@@ -1,12 +1,12 @@
-"""ident.wls against numpy.linalg.lstsq on the weighted system, and %sigma on cases worked out by hand."""
+"""h4bench.ident.wls against numpy.linalg.lstsq on the weighted system, and %sigma on cases worked out by hand."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-import ident
-from ident import PARAMETER_NAMES
+from h4bench import ident
+from h4bench.ident import PARAMETER_NAMES
 
 
 def stacked_problem(seed=0, n_samples=500, p=14, sigmas=(0.1, 0.5, 1.0, 2.0)):

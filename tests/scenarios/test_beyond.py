@@ -9,8 +9,8 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.runner import run_scenario
-from scenarios.spec import ScenarioError
+from h4bench.scenarios.runner import run_scenario
+from h4bench.scenarios.spec import ScenarioError
 
 SCHEMA_KEYS = ("scenario", "parameters", "true", "bound", "min_consistent_bound", "oracle_residual", "seed", "methods")
 FILES = ("result.json", "report.md", "boxes.png", "dataset.npz", "truth.npz")

@@ -1,6 +1,6 @@
 from typer.testing import CliRunner
 
-from scenarios.cli import app
+from h4bench.scenarios.cli import app
 
 
 def test_help_and_version():

@@ -22,11 +22,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import ident
-import sim
-from scenarios import registry
-from scenarios.cli import _num, app
-from scenarios.spec import available
+from h4bench import ident
+from h4bench import sim
+from h4bench.scenarios import registry
+from h4bench.scenarios.cli import _num, app
+from h4bench.scenarios.spec import available
 
 ROOT = Path(__file__).resolve().parents[2]
 HEADER = "t,q1,q2,q3,q4,tau1,tau2,tau3,tau4"
@@ -110,7 +110,7 @@ def test_number_format_takes_texts_and_non_finite_numbers():
 
 
 def test_finite_json_turns_non_finite_numbers_into_null():
-    from scenarios.rundir import finite_json
+    from h4bench.scenarios.rundir import finite_json
 
     text = finite_json({"a": [1.5, float("nan")], "b": np.float64("inf"), "c": np.array([-np.inf, 2.0])})
     assert strict_json(text) == {"a": [1.5, None], "b": None, "c": [None, 2.0]}
@@ -147,7 +147,7 @@ def test_a_model_saved_by_mujoco_runs_the_paper_scenario(tmp_path):
 
 # ---------------------------------------------------------------------------------------------- campaigns
 def test_only_into_a_campaign_of_another_seed_is_refused(tmp_path):
-    from scenarios import campaign
+    from h4bench.scenarios import campaign
     from tests.scenarios.test_trust import fake_job
 
     out = tmp_path / "c"
@@ -203,8 +203,8 @@ def test_identify_into_an_unwritable_out(good_csv, immutable_out):
 # ---------------------------------------------------------------------------------------------- identify
 @pytest.fixture(scope="module")
 def experiment():
-    from scenarios.experiment import run_experiment
-    from scenarios.spec import load_spec
+    from h4bench.scenarios.experiment import run_experiment
+    from h4bench.scenarios.spec import load_spec
 
     spec = load_spec("paper", quick=True)  # 4 s at 1 kHz, uniform noise of bound 1.0 N m
     spec["replay"]["enabled"] = False
@@ -275,7 +275,7 @@ def test_a_broken_urdf_gives_one_error_line(tmp_path, good_csv):
     urdf.write_text('<robot name="r"><link name="a"/><joint name="j" type="revolute"><parent link="a"/>'
                     '<child link="nowhere"/><axis xyz="0 0 1"/><limit effort="1" velocity="1" lower="-1" '
                     'upper="1"/></joint></robot>')
-    res = subprocess.run([sys.executable, "-m", "scenarios.cli", "identify", str(good_csv), "--urdf", str(urdf),
+    res = subprocess.run([sys.executable, "-m", "h4bench.scenarios.cli", "identify", str(good_csv), "--urdf", str(urdf),
                           "--bound", "1", "--out", str(tmp_path / "u")], capture_output=True, text=True,
                          cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
     assert res.returncode == 2, res.stderr

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-import ident
-from scenarios.explain import slice_widths, width_analysis
+from h4bench import ident
+from h4bench.scenarios.explain import slice_widths, width_analysis
 
 
 def _problem(seed, m=300, p=6, b=0.5):

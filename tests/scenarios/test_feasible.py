@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from scenarios import spec as specs
-from scenarios.experiment import run_experiment
-from scenarios.feasible import drawn_methods, parse_pairs
-from scenarios.kinds import paper
+from h4bench.scenarios import spec as specs
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.feasible import drawn_methods, parse_pairs
+from h4bench.scenarios.kinds import paper
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +96,7 @@ def test_parse_pairs_and_spec_checks(tmp_path):
 def _identify(csv, out, *args):
     from typer.testing import CliRunner
 
-    from scenarios.cli import app
+    from h4bench.scenarios.cli import app
 
     return CliRunner().invoke(app, ["identify", str(csv), "--bound", "1.5", "--out", str(out), *map(str, args)])
 
@@ -139,7 +139,7 @@ def test_identify_bad_pairs_is_one_error_line(log_csv, tmp_path):
 
 
 def test_replay_polygons_shrink_as_data_arrive(quick, tmp_path):
-    from scenarios.replay import box_history, write_replay
+    from h4bench.scenarios.replay import box_history, write_replay
     from tests.scenarios.test_replay import read_rrd
 
     run_, feas, _, _, _ = quick

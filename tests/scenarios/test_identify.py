@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import ident
-import sim
-from ident.processing.filtering import ProcessingSettings, derivatives, exclude_low_speed, parallel_filter
-from ident.processing.processing import build_equation
-from ident.robots.h4 import regressor
-from scenarios.cli import _print_summary, app
-from scenarios.spec import DEFAULTS
+from h4bench import ident
+from h4bench import sim
+from h4bench.ident.processing.filtering import ProcessingSettings, derivatives, exclude_low_speed, parallel_filter
+from h4bench.ident.processing.processing import build_equation
+from h4bench.ident.robots.h4 import regressor
+from h4bench.scenarios.cli import _print_summary, app
+from h4bench.scenarios.spec import DEFAULTS
 
 HEADER = "t,q1,q2,q3,q4,tau1,tau2,tau3,tau4"
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,8 +38,8 @@ def _write(path, t, q, tau, fmt="%.17g"):
 
 @pytest.fixture(scope="module")
 def experiment():
-    from scenarios.experiment import run_experiment
-    from scenarios.spec import load_spec
+    from h4bench.scenarios.experiment import run_experiment
+    from h4bench.scenarios.spec import load_spec
 
     spec = load_spec("paper", quick=True)  # 4 s at 1 kHz, uniform noise of bound 1.0 N m, bound 1.5 N m
     spec["replay"]["enabled"] = False
@@ -70,7 +70,7 @@ def _one_error_line(res, *fragments):
 
 
 def test_reader_is_exact_with_both_engines(tmp_path):
-    from sim.csvlog import read_log
+    from h4bench.sim.csvlog import read_log
 
     rng = np.random.default_rng(0)
     n = 5000
@@ -294,7 +294,7 @@ def test_summary_fits_the_terminal(monkeypatch, capsys, columns):
 
 
 def test_number_format_is_short_and_exact_to_4_digits():
-    from scenarios.cli import _num
+    from h4bench.scenarios.cli import _num
 
     for x in (3.770e-4, -1.234e-9, 0.06074, 12.35, 1234.5, 9.99e7, 0.0, -0.5, 123456.0):
         s = _num(x)
@@ -363,7 +363,7 @@ def test_bound_file_errors(good_csv, tmp_path, name, text, fragments):
 
 
 def test_json_is_the_only_stdout(good_csv, tmp_path):
-    cmd = [sys.executable, "-c", "from scenarios.cli import app; app()", "identify", str(good_csv), "--bound", "1.5",
+    cmd = [sys.executable, "-c", "from h4bench.scenarios.cli import app; app()", "identify", str(good_csv), "--bound", "1.5",
            "--out", str(tmp_path / "o"), "--json"]
     out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env={**os.environ, "COLUMNS": "80"})
     assert out.returncode == 0, out.stderr
@@ -372,14 +372,14 @@ def test_json_is_the_only_stdout(good_csv, tmp_path):
 
 def test_json_survives_native_output_on_fd_1(good_csv, tmp_path):
     """A native library writing to file descriptor 1 during the estimation (as HiGHS's banner did)."""
-    code = ("import functools, os, ident.estimators.estimate as e\n"  # the registry's hull resolves this
+    code = ("import functools, os\nimport h4bench.ident.estimators.estimate as e\n"  # the registry's hull resolves this
             "est = e.hull_estimator\n"
             "@functools.wraps(est)\n"  # the same signature: the registry passes only what the hull accepts
             "def noisy(*a, **k):\n"
             "    os.write(1, b'Running HiGHS (native banner)\\n')\n"
             "    return est(*a, **k)\n"
             "e.hull_estimator = noisy\n"
-            "from scenarios.cli import app\n"
+            "from h4bench.scenarios.cli import app\n"
             "app()\n")
     cmd = [sys.executable, "-c", code, "identify", str(good_csv), "--bound", "1.5", "--out", str(tmp_path / "o"), "--json"]
     out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)

@@ -14,18 +14,18 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import ident
-from ident.robots import tx40
-from ident.robots.serial import SerialRobot, default_reach, parameter_joint, physical_prior, process
-from scenarios.cli import app
-from scenarios.identify import URDF_PROCESSING
+from h4bench import ident
+from h4bench.ident.robots import tx40
+from h4bench.ident.robots.serial import SerialRobot, default_reach, parameter_joint, physical_prior, process
+from h4bench.scenarios.cli import app
+from h4bench.scenarios.identify import URDF_PROCESSING
 
 URDF = tx40.urdf_path()
 SAMPLES = 10_000  # 2 s of the 5 kHz log: about 90 processed rows per joint at decimation 100
 
 
 def _tx40_prior_formulas(robot):
-    """ident.robots.tx40.standard_prior as it was written before physical_prior existed (the reference)."""
+    """h4bench.ident.robots.tx40.standard_prior as it was written before physical_prior existed (the reference)."""
     p = robot.n_parameters
     lo, hi = np.zeros(p), np.zeros(p)
     M, r = tx40.ARM_MASS, tx40.REACH
@@ -190,9 +190,9 @@ def test_urdf_option_errors(log_csv, tmp_path):
 
 
 def test_read_log_n_joints(tmp_path):
-    """sim.csvlog.read_log for 6 joints: both engines give Python's float() of the text; errors name the column
+    """h4bench.sim.csvlog.read_log for 6 joints: both engines give Python's float() of the text; errors name the column
     and the row."""
-    from sim.csvlog import DatasetError, read_log
+    from h4bench.sim.csvlog import DatasetError, read_log
 
     rng = np.random.default_rng(3)
     data = np.column_stack([np.arange(50) * 1e-3, rng.normal(size=(50, 12))])

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-import ident
-from scenarios import judging
+from h4bench import ident
+from h4bench.scenarios import judging
 
 ROOT = Path(__file__).resolve().parents[2]
 SHRUNK = "examples.shrunk_hull:estimate"
@@ -213,7 +213,7 @@ def test_h4bench_estimators_json_lists_an_installed_plugin_and_a_broken_one(fake
     import os
 
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(fake_dist), os.environ.get("PYTHONPATH", "")])}
-    res = subprocess.run([sys.executable, "-m", "scenarios.cli", "estimators", "--json"], capture_output=True,
+    res = subprocess.run([sys.executable, "-m", "h4bench.scenarios.cli", "estimators", "--json"], capture_output=True,
                          text=True, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     found = json.loads(res.stdout)
@@ -223,7 +223,7 @@ def test_h4bench_estimators_json_lists_an_installed_plugin_and_a_broken_one(fake
     assert by_name["hull"]["rigorous"] is True and by_name["ols"]["level"] == 0.95
     broken = {b["name"]: b["error"] for b in found["broken"]}
     assert "no_such_module_xyz" in broken["brokenplug"]
-    text = subprocess.run([sys.executable, "-m", "scenarios.cli", "estimators"], capture_output=True, text=True,
+    text = subprocess.run([sys.executable, "-m", "h4bench.scenarios.cli", "estimators"], capture_output=True, text=True,
                           env=env, timeout=120).stdout
     assert "fakeshrunk" in text and "brokenplug" in text and "BROKEN" in text
 
@@ -233,7 +233,7 @@ def test_h4bench_estimators_json_lists_an_installed_plugin_and_a_broken_one(fake
 def critical(fake_dist, tmp_path_factory):
     """enclosure-critical --quick (4 runs) with the references, the unsound example (by module:attribute), the
     installed plugin and a broken one (by entry point)."""
-    from scenarios.runner import run_scenario
+    from h4bench.scenarios.runner import run_scenario
 
     sys.path.insert(0, str(fake_dist))
     try:
@@ -275,8 +275,8 @@ def _runs(out: Path) -> list[dict]:
 
 
 def test_the_method_list_is_part_of_the_campaign_provenance():
-    from scenarios.campaign import provenance
-    from scenarios.registry import load_spec
+    from h4bench.scenarios.campaign import provenance
+    from h4bench.scenarios.registry import load_spec
 
     spec = load_spec("enclosure", quick=True)
     other = json.loads(json.dumps(spec))
@@ -286,7 +286,7 @@ def test_the_method_list_is_part_of_the_campaign_provenance():
 
 @pytest.fixture(scope="module")
 def paper(tmp_path_factory):
-    from scenarios.runner import run_scenario
+    from h4bench.scenarios.runner import run_scenario
 
     out = tmp_path_factory.mktemp("runs") / "paper"
     return run_scenario("paper", quick=True, methods=f"all,{SHRUNK},{ROUNDED},{MINE}", out=out), out
@@ -310,8 +310,8 @@ def test_paper_scenario_judges_every_method_and_flags_only_the_shrunk_hull(paper
 def test_instruments_are_the_reference_motion_regressor_row_aligned(paper):
     """Oracle: W is the measured-motion regressor; the instruments (reference motion, same processing) differ
     from W only by the tracking error and the encoder quantisation: close, not equal."""
-    from scenarios.experiment import instruments, run_experiment
-    from scenarios.registry import load_spec
+    from h4bench.scenarios.experiment import instruments, run_experiment
+    from h4bench.scenarios.registry import load_spec
 
     spec = load_spec("paper", quick=True)
     run = run_experiment(spec, estimate=False)
@@ -323,9 +323,9 @@ def test_instruments_are_the_reference_motion_regressor_row_aligned(paper):
 
 
 def test_identify_gives_the_narrower_than_hull_verdict_without_a_truth(tmp_path):
-    from scenarios.experiment import run_experiment
-    from scenarios.identify import identify_csv
-    from scenarios.registry import load_spec
+    from h4bench.scenarios.experiment import run_experiment
+    from h4bench.scenarios.identify import identify_csv
+    from h4bench.scenarios.registry import load_spec
 
     spec = load_spec("paper", quick=True)
     run = run_experiment(spec, seed=5, estimate=False)
@@ -343,7 +343,7 @@ def test_identify_gives_the_narrower_than_hull_verdict_without_a_truth(tmp_path)
     assert saved["unsound"] == [SHRUNK]
     from typer.testing import CliRunner
 
-    from scenarios.cli import app
+    from h4bench.scenarios.cli import app
 
     res = CliRunner().invoke(app, ["identify", str(path), "--bound", "1.5", "--method", f"hull,{SHRUNK}", "--out",
                                    str(tmp_path / "c")], env={"COLUMNS": "100"})
@@ -354,7 +354,7 @@ def test_identify_gives_the_narrower_than_hull_verdict_without_a_truth(tmp_path)
 def test_run_refuses_an_unknown_method_and_a_bad_run_count_before_running(tmp_path):
     from typer.testing import CliRunner
 
-    from scenarios.cli import app
+    from h4bench.scenarios.cli import app
 
     res = CliRunner().invoke(app, ["run", "enclosure", "--quick", "--methods", "hull,hulll", "--out",
                                    str(tmp_path / "a")])

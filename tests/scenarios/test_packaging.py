@@ -23,6 +23,27 @@ ROOT = Path(__file__).resolve().parents[2]
 CLEAN_ENV = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
 
 
+def _write_wheel(path: Path, name: str, version: str, files: dict[str, str]) -> None:
+    """A minimal pure-Python wheel (PEP 427) holding ``files`` at the top level, with its RECORD."""
+    import base64
+    import hashlib
+    import zipfile
+
+    info = f"{name}-{version}.dist-info"
+    contents = dict(files)
+    contents[f"{info}/METADATA"] = f"Metadata-Version: 2.1\nName: {name.replace('_', '-')}\nVersion: {version}\n"
+    contents[f"{info}/WHEEL"] = "Wheel-Version: 1.0\nGenerator: h4bench-tests\nRoot-Is-Purelib: true\nTag: py3-none-any\n"
+    record = []
+    for arc, text in contents.items():
+        digest = base64.urlsafe_b64encode(hashlib.sha256(text.encode()).digest()).rstrip(b"=").decode()
+        record.append(f"{arc},sha256={digest},{len(text.encode())}")
+    record.append(f"{info}/RECORD,,")
+    contents[f"{info}/RECORD"] = "\n".join(record) + "\n"
+    with zipfile.ZipFile(path, "w") as zf:
+        for arc, text in contents.items():
+            zf.writestr(arc, text)
+
+
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("wheel")
@@ -44,9 +65,28 @@ def installed(tmp_path_factory):
                                   capture_output=True, text=True, check=True).stdout.strip())
     borrowed = [p for p in {sysconfig.get_path("purelib"), sysconfig.get_path("platlib"), *site.getsitepackages()}]
     (purelib / "borrowed-deps.pth").write_text("\n".join(borrowed) + "\n")
-    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(purelib), str(wheel)],
-                   check=True, capture_output=True, timeout=300)
+    # another distribution that owns the generic top-level modules ``ident`` and ``scenarios`` is installed first
+    other = wheels / "other_owner-1.0-py3-none-any.whl"
+    _write_wheel(other, "other_owner", "1.0",
+                 {f"{name}.py": f"OWNER = 'other-owner:{name}'\n" for name in ("ident", "scenarios")})
+    for w in (other, wheel):
+        subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(purelib), str(w)],
+                       check=True, capture_output=True, timeout=300)
     return python, purelib, wheel
+
+
+def test_the_wheel_installs_one_top_level_name(installed):
+    """Only ``h4bench`` at the top level: a distribution owning ``ident`` and ``scenarios`` keeps its modules."""
+    import zipfile
+
+    python, _, wheel = installed
+    tops = {n.split("/")[0] for n in zipfile.ZipFile(wheel).namelist() if ".dist-info" not in n.split("/")[0]}
+    assert tops == {"h4bench"}, tops
+    res = subprocess.run([str(python), "-c", "import ident, scenarios, h4bench.ident, h4bench.scenarios.cli; "
+                          "print(ident.OWNER, scenarios.OWNER)"], capture_output=True, text=True, cwd="/",
+                         env=CLEAN_ENV, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["other-owner:ident", "other-owner:scenarios"]
 
 
 def test_the_wheel_holds_the_models(installed):
@@ -54,21 +94,22 @@ def test_the_wheel_holds_the_models(installed):
 
     _, _, wheel = installed
     names = zipfile.ZipFile(wheel).namelist()
-    assert "h4bench_models/h4.xml" in names and "h4bench_models/scene.xml" in names
-    assert "scenarios/paper.toml" in names and "scenarios/kinds/paper.py" in names
-    assert {"h4bench_data/tx40/curr_data.csv.gz", "h4bench_data/tx40/pos_read_data.csv.gz",
-            "h4bench_data/tx40/LICENSE-Apache-2.0.txt", "h4bench_data/tx40/README.md"} <= set(names)
+    assert "h4bench/models/h4.xml" in names and "h4bench/models/scene.xml" in names
+    assert "h4bench/scenarios/paper.toml" in names and "h4bench/scenarios/kinds/paper.py" in names
+    assert {"h4bench/data/tx40/curr_data.csv.gz", "h4bench/data/tx40/pos_read_data.csv.gz",
+            "h4bench/data/tx40/LICENSE-Apache-2.0.txt", "h4bench/data/tx40/README.md"} <= set(names)
 
 
 def test_an_installed_wheel_runs_the_paper_scenario_from_anywhere(installed, tmp_path):
     python, purelib, _ = installed
-    where = subprocess.run([str(python), "-c", "import sim, scenarios, ident.robots.tx40; print(sim.__file__); "
-                            "print(sim.DEFAULT_MODEL_PATH); print(ident.robots.tx40.DATA_DIR)"],
+    where = subprocess.run([str(python), "-c", "from h4bench import sim, scenarios; import h4bench.ident.robots.tx40; "
+                            "print(sim.__file__); print(sim.DEFAULT_MODEL_PATH); "
+                            "print(h4bench.ident.robots.tx40.DATA_DIR)"],
                            capture_output=True, text=True, cwd=tmp_path, check=True, env=CLEAN_ENV)
     sim_file, model_path, data_dir = where.stdout.split()
     assert all(Path(p).is_relative_to(purelib) for p in (sim_file, model_path, data_dir)), where.stdout
     assert (Path(data_dir) / "curr_data.csv.gz").is_file()
-    res = subprocess.run([str(python), "-m", "scenarios.cli", "run", "paper", "--quick", "--json", "--out",
+    res = subprocess.run([str(python), "-m", "h4bench.scenarios.cli", "run", "paper", "--quick", "--json", "--out",
                           str(tmp_path / "paper")], capture_output=True, text=True, cwd=tmp_path, timeout=600,
                          env=CLEAN_ENV)
     assert res.returncode == 0, res.stderr

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import ident
-import sim
-from scenarios.budget import error_budget
-from scenarios.experiment import run_experiment
-from scenarios.spec import load_spec
+from h4bench import ident
+from h4bench import sim
+from h4bench.scenarios.budget import error_budget
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.spec import load_spec
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +78,7 @@ def test_exact_states_boxes_shrink_with_the_record(ten_seconds):
 def test_identify_a_csv_log(tmp_path, ten_seconds):
     from typer.testing import CliRunner
 
-    from scenarios.cli import app
+    from h4bench.scenarios.cli import app
 
     ds = ten_seconds.dataset
     path = tmp_path / "log.csv"

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-import ident
-from scenarios.experiment import run_experiment
-from scenarios.replay import RRD_MAGIC, TIMELINE, ReplayError, box_history, viewer_command, write_replay
-from scenarios.spec import load_spec
+from h4bench import ident
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.replay import RRD_MAGIC, TIMELINE, ReplayError, box_history, viewer_command, write_replay
+from h4bench.scenarios.spec import load_spec
 from tests.conftest import cartesian_reference
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -247,7 +247,7 @@ def test_write_replay_validates(run, tmp_path):
 def test_write_replay_with_project_estimators(run, tmp_path):
     """The default estimator is ident.estimate (skipped until the estimators land)."""
     if not hasattr(ident, "estimate"):
-        pytest.skip("ident.estimate not available yet")
+        pytest.skip("h4bench.ident.estimate not available yet")
     r = dataclasses.replace(run, boxes={}, failures={})
     h = box_history(r, methods=("hull",), points=2)
     assert h["methods"]["hull"]["ok"][-1]
@@ -284,7 +284,7 @@ def test_viewer_command_checks_the_file(rrd, tmp_path):
 
 _VIEWER_PARENT = """
 import sys
-import scenarios.replay as replay
+import h4bench.scenarios.replay as replay
 child = [sys.executable, "-c", "import time; print('viewer up', flush=True); time.sleep(120)"]
 replay.viewer_command = lambda *a, **k: child  # a stand-in for rerun (same process tree)
 replay.open_viewer(sys.argv[1])

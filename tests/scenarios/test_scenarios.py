@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from scenarios.cli import app
-from scenarios.runner import run_scenario
-from scenarios.spec import ScenarioError, load_spec
+from h4bench.scenarios.cli import app
+from h4bench.scenarios.runner import run_scenario
+from h4bench.scenarios.spec import ScenarioError, load_spec
 
 SCHEMA_KEYS = ("scenario", "parameters", "true", "bound", "min_consistent_bound", "oracle_residual", "seed", "methods")
 

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from scenarios import campaign as camp
-from scenarios.registry import load_spec
-from scenarios.rundir import MARKER, OwnedFolder, RunFolderError, check_target, clean_stale_temporaries, is_owned
-from scenarios.runner import run_scenario
-from scenarios.spec import ScenarioError
+from h4bench.scenarios import campaign as camp
+from h4bench.scenarios.registry import load_spec
+from h4bench.scenarios.rundir import MARKER, OwnedFolder, RunFolderError, check_target, clean_stale_temporaries, is_owned
+from h4bench.scenarios.runner import run_scenario
+from h4bench.scenarios.spec import ScenarioError
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -155,8 +155,8 @@ def test_spec_lists_are_checked_with_their_names(tmp_path):
 _SLOW_CAMPAIGN = textwrap.dedent("""
     import os, sys, time
     from pathlib import Path
-    from scenarios import campaign as camp
-    from scenarios.registry import load_spec
+    from h4bench.scenarios import campaign as camp
+    from h4bench.scenarios.registry import load_spec
 
     def slow_job(spec, index, base_seed):
         time.sleep(0.5 if index == 0 else 30.0)
@@ -234,7 +234,7 @@ def test_workers_die_with_a_killed_campaign(tmp_path):
 # ------------------------------------------------------------------------------------------ output channels
 def test_json_output_is_one_json_document(tmp_path):
     """Native solver banners must not reach stdout (HiGHS prints one from C at its first use)."""
-    res = subprocess.run([sys.executable, "-m", "scenarios.cli", "run", "paper", "--quick", "--json",
+    res = subprocess.run([sys.executable, "-m", "h4bench.scenarios.cli", "run", "paper", "--quick", "--json",
                           "--out", str(tmp_path / "p")], capture_output=True, text=True, cwd=tmp_path,
                          env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     assert res.returncode == 0, res.stderr

@@ -17,8 +17,8 @@ import pytest
 import scipy.linalg
 import scipy.signal
 
-from sim.control_design import ControllerDesign, LoopReport, design_joint_controller
-from sim.controller import JointController, VelocityFilter
+from h4bench.sim.control_design import ControllerDesign, LoopReport, design_joint_controller
+from h4bench.sim.controller import JointController, VelocityFilter
 
 DT = 1e-3
 J = np.array([0.02, 0.03, 0.04, 0.05])

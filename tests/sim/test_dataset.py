@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import sim
+from h4bench import sim
 
 
 def _dataset(n=50):
@@ -81,7 +81,7 @@ def test_gzip_log_reads_as_the_plain_one(tmp_path, engine):
     import gzip
     import shutil
 
-    from sim.csvlog import read_log
+    from h4bench.sim.csvlog import read_log
 
     rng = np.random.default_rng(0)
     rows = [[k * 1e-3] + list(rng.standard_normal(8)) for k in range(3000)]

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-import sim
+from h4bench import sim
 from tests.conftest import random_workspace_poses
 
 

@@ -13,19 +13,19 @@ HEAVY = ("mujoco", "control", "matplotlib")
 
 def _loaded(statement: str) -> set[str]:
     code = f"import json, sys\n{statement}\nprint(json.dumps(sorted(sys.modules)))"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd="/").stdout
     return set(json.loads(out.splitlines()[-1]))
 
 
 @pytest.mark.parametrize(("statement", "absent"), [
-    ("import sim", HEAVY),
-    ("import sim.validation", HEAVY),
-    ("import sim.noise", HEAVY),
-    ("import sim.controller", HEAVY),
-    ("import sim.control_design", ("control", "matplotlib")),
-    ("import sim.kinematics", ("control", "matplotlib")),
-    ("import sim\nsim.simulate", ("control", "matplotlib")),
-    ("import sim\nsim.TorqueNoise(1.0)", HEAVY),
+    ("import h4bench.sim", HEAVY),
+    ("import h4bench.sim.validation", HEAVY),
+    ("import h4bench.sim.noise", HEAVY),
+    ("import h4bench.sim.controller", HEAVY),
+    ("import h4bench.sim.control_design", ("control", "matplotlib")),
+    ("import h4bench.sim.kinematics", ("control", "matplotlib")),
+    ("from h4bench import sim\nsim.simulate", ("control", "matplotlib")),
+    ("from h4bench import sim\nsim.TorqueNoise(1.0)", HEAVY),
 ])
 def test_import_loads_no_heavy_package(statement, absent):
     mods = _loaded(statement)
@@ -33,22 +33,23 @@ def test_import_loads_no_heavy_package(statement, absent):
 
 
 def test_sub_modules_load_only_what_they_import():
-    mods = {m for m in _loaded("import sim.validation\nimport sim.kinematics") if m.split(".")[0] == "sim"}
-    assert mods == {"sim", "sim.validation", "sim.kinematics", "sim.model"}
+    mods = {m for m in _loaded("import h4bench.sim.validation\nimport h4bench.sim.kinematics")
+            if m.startswith("h4bench.sim")}
+    assert mods == {"h4bench.sim", "h4bench.sim.validation", "h4bench.sim.kinematics", "h4bench.sim.model"}
 
 
 def test_designing_a_controller_loads_python_control():
-    mods = _loaded("import sim\nsim.design_joint_controller(0.05, 0.1)")
+    mods = _loaded("from h4bench import sim\nsim.design_joint_controller(0.05, 0.1)")
     assert "control" in mods
 
 
 def test_public_names_resolve_and_sim_simulate_is_the_function():
-    import sim
-    import sim.simulate  # noqa: F401  (binds the sub-module; the package attribute stays the function)
+    from h4bench import sim
+    import h4bench.sim.simulate  # noqa: F401  (binds the sub-module; the package attribute stays the function)
 
     for name in sim.__all__:
         assert getattr(sim, name) is not None, name
-    assert callable(sim.simulate) and sim.simulate.__module__ == "sim.simulate"
+    assert callable(sim.simulate) and sim.simulate.__module__ == "h4bench.sim.simulate"
     assert sim.TorqueNoise is sim.noise.TorqueNoise
     assert sim.SimulationError is sim.validation.SimulationError
     with pytest.raises(AttributeError, match="no attribute 'nope'"):

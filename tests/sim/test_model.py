@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-import sim
+from h4bench import sim
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -111,7 +111,7 @@ def _raw_model():
 
 
 def test_inverse_weights_are_scaled_once_and_survive_set_const(model):
-    """sim.load_model scales the non-motor inverse weights by the model's numeric; re-applying (which re-runs
+    """h4bench.sim.load_model scales the non-motor inverse weights by the model's numeric; re-applying (which re-runs
     mj_setConst) gives the same values, and the sim.variants builders apply it too."""
     raw = _raw_model()
     i = mujoco.mj_name2id(raw, mujoco.mjtObj.mjOBJ_NUMERIC, "h4_invweight_scale")

@@ -7,8 +7,8 @@ import mujoco
 import numpy as np
 import pytest
 
-import ident
-import sim
+from h4bench import ident
+from h4bench import sim
 from tests.conftest import friction_saturated, record_aggressive
 
 
@@ -76,7 +76,7 @@ def test_the_shipped_model_is_left_as_written():
 
 
 def test_the_variants_of_a_written_back_model_are_assembled_too(tmp_path):
-    """sim.randomised_model compiles its own MjSpec: its loops are closed like load_model's."""
+    """h4bench.sim.randomised_model compiles its own MjSpec: its loops are closed like load_model's."""
     model = sim.randomised_model(3, 0.3, _to_xml(tmp_path))
     d = mujoco.MjData(model)
     mujoco.mj_kinematics(model, d)

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim import noise as N
+from h4bench.sim import noise as N
 
 LIMIT = 15.0  # N m, the H4's actuator range (models/h4.xml ctrlrange)
 DT = 1e-3
@@ -315,9 +315,9 @@ def test_what_survives_the_identification_filters(geometry):
     """Fraction of each component's bound left after a zero-phase 2 Hz Butterworth + the paper scenario's
     parallel filter (decimation 10, 41 taps), along a real exciting trajectory with its inverse-dynamics
     torques. White noise is averaged away; the drive mix is structured and keeps most of its bound."""
-    import ident
-    import trajectories
-    from ident.processing.filtering import default_edge_samples, lowpass_position, parallel_filter
+    from h4bench import ident
+    from h4bench import trajectories
+    from h4bench.ident.processing.filtering import default_edge_samples, lowpass_position, parallel_filter
 
     ref = trajectories.fourier_excitation(geometry, duration=10.0, seed=0, optimise=False)
     tau = ident.inverse_dynamics(geometry, ident.NOMINAL_PARAMETERS, ref.q, ref.qd, ref.qdd)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import ident
-import sim
+from h4bench import ident
+from h4bench import sim
 from tests.conftest import (
     NOMINAL,
     cartesian_reference,
@@ -187,8 +187,8 @@ def test_paper_scenario_error_budget_model_part_is_negligible():
     """The paper scenario (scenarios/paper.toml: optimised 10 s Fourier trajectory, 1 N m noise): the error
     budget's raw "model" part (tau_applied - W(exact states) theta_true) is < 1e-4 N m at p99, and on
     friction-saturated samples eq. 19 matches MuJoCo to < 1e-5 N m at worst (~20 s)."""
-    from scenarios.experiment import run_experiment as run_scenario
-    from scenarios.spec import load_spec
+    from h4bench.scenarios.experiment import run_experiment as run_scenario
+    from h4bench.scenarios.spec import load_spec
 
     run = run_scenario(load_spec("paper"), estimate=False)
     assert run.budget["raw"]["model"]["p99"] < 1e-4
@@ -205,7 +205,7 @@ def test_held_torque_matches_the_mid_step_regressor(geometry, experiment):
     parallel filter about 5 times better than at the sample instants, whose acceleration is half a step late
     (measured 0.005 vs 0.023 N m on this gentle 3 s motion, |qdd| <= 54 rad/s^2; the paper scenario's motion
     makes the late acceleration cost over 0.25 N m)."""
-    from ident.processing.filtering import decimation_fir, derivatives
+    from h4bench.ident.processing.filtering import decimation_fir, derivatives
 
     _, data, truth = experiment
     h = decimation_fir(10, 41, 0.2)

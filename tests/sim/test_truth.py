@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 import pytest
 
-import sim
-from ident import PARAMETER_NAMES
+from h4bench import sim
+from h4bench.ident import PARAMETER_NAMES
 from tests.conftest import random_workspace_poses
 
 

@@ -7,8 +7,8 @@ import mujoco
 import numpy as np
 import pytest
 
-import ident
-import sim
+from h4bench import ident
+from h4bench import sim
 from tests.conftest import friction_saturated, record_exact
 
 

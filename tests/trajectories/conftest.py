@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-import trajectories as tj
+from h4bench import trajectories as tj
 
 
 @pytest.fixture(scope="session")

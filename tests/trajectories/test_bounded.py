@@ -10,13 +10,13 @@ import pytest
 import scipy.optimize
 import scipy.signal
 
-import ident
-import sim
-import trajectories as tj
-import trajectories.excitation as tx
-from ident.processing.filtering import ProcessingSettings
+from h4bench import ident
+from h4bench import sim
+from h4bench import trajectories as tj
+import h4bench.trajectories.excitation as tx
+from h4bench.ident.processing.filtering import ProcessingSettings
 from tests.conftest import bounded_noise_problem
-from trajectories.bounded import HalfwidthProblem, halfwidths, smooth_max
+from h4bench.trajectories.bounded import HalfwidthProblem, halfwidths, smooth_max
 
 PAPER_PROCESSING = dict(position_cutoff_hz=20.0, butter_order=4, decimation=10, numtaps=41, fir_cutoff=0.8,
                         speed_threshold=0.05)  # scenarios/spec.py DEFAULTS["processing"]
@@ -98,7 +98,7 @@ def test_processed_regressor_equals_a_direct_convolution(geometry, h_design):
 def test_design_grid_criterion_is_close_to_the_processed_one(geometry):
     """The optimiser's grid (raw rows, 12 samples per period of the top harmonic) predicts the 100 Hz processed
     h_j of a 10 s H4-class start within 25 % (oracle: tj.design_criterion on the full 1 kHz reference)."""
-    from trajectories.fourier import PhaseSchedule, fourier_basis  # noqa: PLC0415
+    from h4bench.trajectories.fourier import PhaseSchedule, fourier_basis  # noqa: PLC0415
 
     traj = tj.fourier_excitation(geometry, 10.0, seed=0, optimise=False, limits=tj.Limits.h4_class(), harmonics=4,
                                  base_hz=0.75, criterion="h", processing=PAPER_PROCESSING)
@@ -210,7 +210,7 @@ def test_design_excitation_rejects_bad_arguments(geometry):
 def test_design_gradient_matches_finite_differences_of_the_criterion(geometry):
     """The chain rule through the grid (envelope theorem on the LPs, dW/dz from per-sample differences) against
     central differences of the criterion itself along random directions of the coefficients."""
-    from trajectories.fourier import PhaseSchedule, fourier_basis  # noqa: PLC0415
+    from h4bench.trajectories.fourier import PhaseSchedule, fourier_basis  # noqa: PLC0415
 
     sched = PhaseSchedule.slow_fast(4.0, 0.3, 0.2, 0.5, 0.5, 1.0)
     phi, phid, phidd = sched(np.linspace(0, 4.0, 150))
@@ -234,7 +234,7 @@ def test_design_gradient_matches_finite_differences_of_the_criterion(geometry):
 def test_h_design_draws_another_start_when_the_first_keeps_too_few_rows(geometry, monkeypatch):
     """An infinite criterion at the start (too few rows above the speed threshold) would stop the optimiser at
     once: the design draws another start from the same seed's generator, and says how many it drew."""
-    from trajectories.bounded import HalfwidthProblem
+    from h4bench.trajectories.bounded import HalfwidthProblem
 
     kwargs = dict(seed=3, optimise=False, limits=tj.Limits.h4_class(), criterion="h", harmonics=4, base_hz=0.75,
                   processing=PAPER_PROCESSING)

@@ -8,9 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-import ident
-import sim
-import trajectories as tj
+from h4bench import ident
+from h4bench import sim
+from h4bench import trajectories as tj
 
 
 def first_bad(values, lower, upper):

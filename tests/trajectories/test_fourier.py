@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import ident
-import sim
-import trajectories as tj
+from h4bench import ident
+from h4bench import sim
+from h4bench import trajectories as tj
 from tests.conftest import random_workspace_poses
-from trajectories.design import CONSTRAINT_NAMES, CoefficientProblem, fast_motion
-from trajectories.fourier import START_SCALE, PhaseSchedule, fourier_basis
+from h4bench.trajectories.design import CONSTRAINT_NAMES, CoefficientProblem, fast_motion
+from h4bench.trajectories.fourier import START_SCALE, PhaseSchedule, fourier_basis
 
 
 def scaled_cond(geometry, traj):

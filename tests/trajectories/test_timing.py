@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import toppra
 
-import ident
-import sim
-import trajectories as tj
-from trajectories.checks import check_samples
-from trajectories.timing import _FS, _FV, NominalTorqueConstraint
+from h4bench import ident
+from h4bench import sim
+from h4bench import trajectories as tj
+from h4bench.trajectories.checks import check_samples
+from h4bench.trajectories.timing import _FS, _FV, NominalTorqueConstraint
 
 PICK_PLACE = np.array([  # home -> above pick -> pick -> above pick -> above place -> place -> home [m, m, m, rad]
     [0.0, 0.0, -0.55, 0.0], [0.08, 0.06, -0.52, 0.3], [0.08, 0.06, -0.64, 0.3], [0.08, 0.06, -0.52, 0.3],

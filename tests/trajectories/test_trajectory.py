@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-import trajectories as tj
+from h4bench import trajectories as tj
 
 
 def test_save_load_round_trip_is_exact(tmp_path, short_excitation):
@@ -99,7 +99,7 @@ def test_the_data_type_does_not_import_its_checks():
     import ast  # noqa: PLC0415
     import inspect  # noqa: PLC0415
 
-    import trajectories.trajectory as module  # noqa: PLC0415
+    import h4bench.trajectories.trajectory as module  # noqa: PLC0415
 
     imported = set()
     for node in ast.walk(ast.parse(inspect.getsource(module))):

@@ -3,7 +3,7 @@ purpose, to be caught by the workbench's narrower-than-hull check and the enclos
 
 from __future__ import annotations
 
-import ident
+from h4bench import ident
 
 FRACTION = 0.10
 

@@ -9,7 +9,7 @@ from fractions import Fraction
 import numpy as np
 from scipy.optimize import linprog
 
-from ident import Box
+from h4bench.ident import Box
 
 
 def problem(rng, p: int, N: int, *, noise: float = 0.1, prior_halfwidth: float = 1.0, per_row: bool = True):

@@ -6,8 +6,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from ident import Box, InconsistentDataError
-from ident.estimators.contractor import contract, contractor
+from h4bench.ident import Box, InconsistentDataError
+from h4bench.ident.estimators.contractor import contract, contractor
 from tests.ident.estimators import oracles
 
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from ident import Box, InconsistentDataError
-from ident.estimators.ellipsoid import ellipsoid, strip_update
+from h4bench.ident import Box, InconsistentDataError
+from h4bench.ident.estimators.ellipsoid import ellipsoid, strip_update
 from tests.ident.estimators import oracles
 
 

@@ -4,17 +4,17 @@ keywords it takes, a valid box inside the prior and a set of the documented type
 import numpy as np
 import pytest
 
-from ident.estimators import registry
+from h4bench.ident.estimators import registry
 from tests.ident.estimators import oracles
 
 SPECS = {
-    "ident.estimators.ellipsoid:ellipsoid": ("guaranteed", False, "ellipsoid"),
-    "ident.estimators.zonotope:zonotope": ("guaranteed", False, "zonotope"),
-    "ident.estimators.zonotope:parallelotope": ("guaranteed", False, "zonotope"),
-    "ident.estimators.contractor:contractor": ("guaranteed", True, "zonotope"),
-    "ident.estimators.statistical:ols": ("statistical", False, "ellipsoid"),
-    "ident.estimators.statistical:wls": ("statistical", False, "ellipsoid"),
-    "ident.estimators.statistical:iv": ("statistical", False, "ellipsoid"),
+    "h4bench.ident.estimators.ellipsoid:ellipsoid": ("guaranteed", False, "ellipsoid"),
+    "h4bench.ident.estimators.zonotope:zonotope": ("guaranteed", False, "zonotope"),
+    "h4bench.ident.estimators.zonotope:parallelotope": ("guaranteed", False, "zonotope"),
+    "h4bench.ident.estimators.contractor:contractor": ("guaranteed", True, "zonotope"),
+    "h4bench.ident.estimators.statistical:ols": ("statistical", False, "ellipsoid"),
+    "h4bench.ident.estimators.statistical:wls": ("statistical", False, "ellipsoid"),
+    "h4bench.ident.estimators.statistical:iv": ("statistical", False, "ellipsoid"),
 }
 
 

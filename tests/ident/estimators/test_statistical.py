@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from ident import Box
-from ident.estimators.statistical import iv, iv_at, ols, ols_at, wls, wls_at
+from h4bench.ident import Box
+from h4bench.ident.estimators.statistical import iv, iv_at, ols, ols_at, wls, wls_at
 
 WIDE = 1e6
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from ident import Box, InconsistentDataError
-from ident.estimators.zonotope import _reduce, parallelotope, zonotope, zonotope_at
+from h4bench.ident import Box, InconsistentDataError
+from h4bench.ident.estimators.zonotope import _reduce, parallelotope, zonotope, zonotope_at
 from tests.ident.estimators import oracles
 
 

@@ -1,0 +1,29 @@
+"""The one import package ``h4bench``, mapped over the checkout's top-level folders.
+
+The source checkout keeps ``sim/``, ``ident/``, ``trajectories/``, ``scenarios/``, ``models/`` and ``data/`` at its
+top level; the wheel installs them as ``h4bench.sim``, ``h4bench.ident``, ... and nothing else at the top level.
+The folders are named once, in ``h4bench/__init__.py``; their sub-packages are found, not listed.
+"""
+
+import ast
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+ROOT = Path(__file__).resolve().parent
+
+
+def _layout() -> dict[str, tuple[str, ...]]:
+    tree = ast.parse((ROOT / "h4bench" / "__init__.py").read_text())
+    return {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+            if isinstance(node, ast.Assign) and node.targets[0].id in ("SUBPACKAGES", "DATA_PACKAGES")}
+
+
+LAYOUT = _layout()
+packages = ["h4bench"]
+package_dir = {"h4bench": "h4bench"}
+for folder in LAYOUT["SUBPACKAGES"] + LAYOUT["DATA_PACKAGES"]:
+    package_dir[f"h4bench.{folder}"] = folder
+    packages += [f"h4bench.{folder}"] + [f"h4bench.{folder}.{sub}" for sub in find_packages(folder)]
+
+setup(packages=packages, package_dir=package_dir)
