@@ -1,0 +1,69 @@
+"""ident.processing.errorspec: the error specification's checks and the per-sample position error bound."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
+
+
+def _spec(**kw):
+    base = dict(n_joints=4, sample_period=1e-3, torque_error=1.3, qd_max=15.0, qdd_max=600.0,
+                position_resolution=2 * np.pi / 20000)
+    base.update(kw)
+    return ErrorSpec(**base)
+
+
+def test_scalars_are_broadcast_per_joint_and_round_trip_through_a_table():
+    spec = _spec(sources={"torque_error": "drive data sheet"})
+    assert spec.torque_error.shape == (4,) and np.all(spec.qdd_max == 600.0)
+    again = ErrorSpec.from_mapping({k: v for k, v in spec.to_dict().items() if k not in ("n_joints",)
+                                    and v is not None}, 4)
+    assert again.to_dict() == spec.to_dict()
+
+
+def test_counts_per_turn_give_the_resolution(tmp_path):
+    f = tmp_path / "spec.toml"
+    f.write_text("[error_model]\nsample_period = 0.001\ncounts_per_turn = 20000\ntorque_error = [1, 1, 1, 2]\n"
+                 "qd_max = 15\nqdd_max = 600\n[error_model.sources]\ntorque_error = 'assumed'\n")
+    spec = ErrorSpec.from_toml(f, 4)
+    assert spec.position_resolution == pytest.approx(np.full(4, 2 * np.pi / 20000), rel=1e-15)
+    assert spec.torque_error.tolist() == [1, 1, 1, 2] and spec.sources == {"torque_error": "assumed"}
+    q = np.random.default_rng(0).uniform(-3, 3, (50, 4))
+    assert np.all(spec.position_error(q) == np.pi / 20000)
+
+
+@pytest.mark.parametrize(("kw", "match"), [
+    ({"torque_error": [1, 2]}, "torque_error must be one number or 4"),
+    ({"qd_max": -1.0}, "qd_max must be > 0"),
+    ({"sample_period": 0.0}, "sample_period must be finite and > 0"),
+    ({"significant_digits": 5}, "exactly one of position_resolution"),
+    ({"latency": 1e-3}, "needs torque_rate"),
+    ({"torque_timing": "late"}, "torque_timing must be one of"),
+    ({"sources": {"nope": "x"}}, "unknown entries"),
+])
+def test_bad_entries_are_named(kw, match):
+    with pytest.raises(ErrorSpecError, match=match):
+        _spec(**kw)
+
+
+def test_a_table_with_unknown_or_missing_keys_is_refused():
+    with pytest.raises(ErrorSpecError, match="unknown keys"):
+        ErrorSpec.from_mapping({"sample_period": 1e-3, "allowance": 0.2}, 4)
+    with pytest.raises(ErrorSpecError, match="missing"):
+        ErrorSpec.from_mapping({"sample_period": 1e-3}, 4)
+
+
+def test_significant_digits_bound_covers_the_written_values():
+    """Oracle: Python's own formatting with 5 significant digits, read back; the bound holds for every value,
+    decade boundaries and values rounded up into the next decade included."""
+    rng = np.random.default_rng(1)
+    true = np.concatenate([rng.uniform(-4, 4, (400, 2)), 10.0 ** rng.uniform(-6, 1, (400, 2)),
+                           np.array([[0.999996, 9.99996], [-0.0999996, 1e-5]])])
+    written = np.vectorize(lambda v: float(f"{v:.5g}"))(true)
+    spec = ErrorSpec(n_joints=2, sample_period=2e-4, torque_error=1.0, qd_max=1.0, qdd_max=1.0,
+                     significant_digits=5)
+    bound = spec.position_error(written)
+    assert np.all(np.abs(written - true) <= bound)
+    assert np.max(np.abs(written - true) / bound) > 0.9  # not loose: some values use most of their half unit
