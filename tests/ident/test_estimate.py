@@ -212,22 +212,3 @@ def test_integer_and_fortran_ordered_input_is_accepted():
     y = (W @ np.ones(3)).astype(np.int64)
     box = ident.estimate(W, y, 1, (np.zeros(3), 2 * np.ones(3)))
     assert box.contains(np.ones(3)).all()
-
-
-def test_estimators_import_neither_sim_nor_mujoco():
-    """The estimators work on any (W, y) and never import the simulator (static check; the layer rules are in
-    tests/test_architecture.py)."""
-    import ast
-    from pathlib import Path
-
-    root = Path(ident.__file__).parent
-    for name in ("numerics/interval", "estimators/hull", "estimators/cgsp", "estimators/wls", "estimators/estimate",
-                 "numerics/lp"):
-        tree = ast.parse((root / f"{name}.py").read_text())
-        modules = {a.name.removeprefix("h4bench.").split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
-                   for a in n.names}
-        modules |= {n.module.removeprefix("h4bench.").split(".")[0] for n in ast.walk(tree)
-                    if isinstance(n, ast.ImportFrom) and n.module}
-        modules |= {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module == "h4bench"
-                    for a in n.names}
-        assert not modules & {"sim", "mujoco"}, name
