@@ -177,8 +177,8 @@ INF_Y[3] = np.inf
         ({"W": NAN_W}, ValueError, r"W must be finite, got 1 NaN and 0 inf entries \(first at index \(4, 1\)\)"),
         ({"y": INF_Y}, ValueError, r"y must be finite, got 0 NaN and 1 inf"),
         ({"y": GOOD_Y[:-1]}, ValueError, r"y must have shape \(m,\) = \(20,\) to match W, got \(19,\)"),
-        ({"W": GOOD_W[:2]}, ValueError, r"W must have shape \(m, p\) with m >= p >= 1, got \(2, 3\)"),
-        ({"W": GOOD_W[:, 0]}, ValueError, r"W must have shape \(m, p\) with m >= p >= 1, got \(20,\)"),
+        ({"W": GOOD_W[:0]}, ValueError, r"W must have shape \(m, p\) with m >= 1 and p >= 1, got \(0, 3\)"),
+        ({"W": GOOD_W[:, 0]}, ValueError, r"W must have shape \(m, p\) with m >= 1 and p >= 1, got \(20,\)"),
         ({"W": np.full((20, 3), "a")}, TypeError, r"W must be a real numeric array, got dtype <U1"),
         ({"bound": 0.0}, ValueError, r"bound must be finite and > 0 .* got 0.0"),
         ({"bound": -1.0}, ValueError, r"bound must be finite and > 0"),
@@ -231,3 +231,22 @@ def test_estimators_import_neither_sim_nor_mujoco():
         modules |= {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module == "h4bench"
                     for a in n.names}
         assert not modules & {"sim", "mujoco"}, name
+
+
+@pytest.mark.parametrize("method", ["hull", "cgsp", "contractor", "zonotope", "ellipsoid", "parallelotope"])
+def test_fewer_rows_than_parameters_give_an_outer_box(method):
+    """N < p is a bounded polytope (the prior bounds it): every guaranteed built-in returns a box containing the
+    exact hull (scipy linprog), the hull equal to it within the LP tolerance."""
+    from tests.ident.estimators.oracles import box_contains, exact_hull
+
+    rng = np.random.default_rng(7)
+    W = rng.standard_normal((2, 5))
+    theta = rng.uniform(-1, 1, 5)
+    y = W @ theta + rng.uniform(-0.1, 0.1, 2)
+    prior = Box(theta - 1.0, theta + 1.0)
+    lo, hi = exact_hull(W, y, np.full(2, 0.1), prior)
+    box = ident.estimate(W, y, 0.1, (prior.lower, prior.upper), method=method)
+    assert box_contains(box, lo, hi)
+    if method == "hull":
+        np.testing.assert_allclose(box.lower, lo, atol=1e-7)
+        np.testing.assert_allclose(box.upper, hi, atol=1e-7)
