@@ -40,7 +40,7 @@ from h4bench.ident.errors import EstimatorError
 from h4bench.ident.estimators.checks import check_problem, real_array
 
 __all__ = ["BUILTINS", "CLAIMS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS", "Available", "Estimator",
-           "available", "call", "declare", "get", "register", "takes"]
+           "available", "call", "claims_table", "declare", "get", "register", "takes"]
 
 ENTRY_POINT_GROUP = "h4bench.estimators"
 KINDS = ("guaranteed", "statistical")
@@ -307,6 +307,17 @@ def _check_result(est: Estimator, box, p: int, names: tuple[str, ...] | None = N
     if np.any(lower > upper):
         raise bad(f"a box with lower > upper for parameter(s) {np.flatnonzero(lower > upper).tolist()}")
     return box if isinstance(box, Box) else Box(lower, upper, names)
+
+
+def claims_table() -> str:
+    """The built-ins' claims as the Markdown table of ``docs/estimators.md`` (a test checks the page holds it)."""
+    rows = ["| name | kind | rigorous | context | what it is | citation |", "|---|---|---|---|---|---|"]
+    for est in BUILTINS.values():
+        kind = est.kind if est.level is None else f"{est.kind}, {est.level:g}"
+        context = ", ".join(f"`{k}`" for k in est.context) or "-"
+        rows.append(f"| `{est.name}` | {kind} | {'yes' if est.rigorous else 'no'} | {context} | {est.description} "
+                    f"| {est.citation} |")
+    return "\n".join(rows)
 
 
 def takes(method, keyword: str) -> bool:
