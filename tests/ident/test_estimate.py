@@ -250,3 +250,12 @@ def test_fewer_rows_than_parameters_give_an_outer_box(method):
     if method == "hull":
         np.testing.assert_allclose(box.lower, lo, atol=1e-7)
         np.testing.assert_allclose(box.upper, hi, atol=1e-7)
+
+
+def test_the_builtin_dispatch_runs_only_its_own_methods():
+    """estimate.METHODS names what _builtin_estimate runs; another registry name is refused, not run as cgsp."""
+    from h4bench.ident.estimators import estimate as est
+
+    assert est.METHODS == ("hull", "cgsp")
+    with pytest.raises(ValueError, match="method must be one of \\('hull', 'cgsp'\\), got 'ellipsoid'"):
+        est._builtin_estimate(GOOD_W, GOOD_Y, 1.0, GOOD_PRIOR, "ellipsoid")

@@ -68,6 +68,9 @@ def test_context_reaches_only_the_estimators_that_take_it():
     W, y, b, prior, theta = oracles.problem(rng, 3, 40)
     ident.estimate(W, y, b, prior, method=plugin, groups=np.arange(40) % 4, check_consistency=False)
     assert set(seen) == {"groups"}
+    assert registry.takes(plugin, "instruments") and not registry.takes(plugin, "check_consistency")
+    assert registry.takes("iv", "instruments") and not registry.takes("hull", "instruments")
+    assert not registry.takes("no-such-estimator", "instruments")
     assert registry.get("hull").context == ("check_consistency",)
     assert registry.get("iv").context == ("instruments",) and registry.get("wls").context == ("groups",)
 
