@@ -43,6 +43,7 @@ import numpy as np
 from h4bench.ident.box import Box
 from h4bench.ident.errors import EstimatorError, InconsistentDataError
 from h4bench.ident.estimators import registry
+from h4bench.ident.estimators.estimate import estimate, min_consistent_bound
 from h4bench.ident.estimators.proof import excluded_point, proven_points
 
 __all__ = ["CheckResult", "ConformanceReport", "Problem", "check_estimator", "problems"]
@@ -164,8 +165,6 @@ def _h4_like(rng, samples: int = 40):
 
 def problems(seed: int = 0) -> list[Problem]:
     """The generated problems of the check (module docstring), reproducible from ``seed``."""
-    from h4bench.ident.estimators.estimate import min_consistent_bound
-
     rng = np.random.default_rng(seed)
     out = []
     W, y, b, prior, _ = _random(rng, 80, 4)
@@ -199,8 +198,6 @@ def _copies(problem: Problem) -> list[tuple[str, np.ndarray, np.ndarray]]:
 
 def _reference(problem: Problem) -> tuple[np.ndarray, float, str]:
     """The proven points (p, k) of the problem's feasible set from the exact hull, its seconds, and a note."""
-    from h4bench.ident.estimators.estimate import estimate
-
     t0 = time.perf_counter()
     try:
         hull = estimate(problem.W, problem.y, problem.bound, problem.prior, method="hull")
@@ -218,7 +215,8 @@ def _proof(est, problem: Problem, j: int, x: np.ndarray, lower=None, upper=None)
     if lower is None:
         return (f"{est.name} says the set is proven empty, but the point {point} is proven in it",
                 {"parameter": name, "point": point, "box": None})
-    return (f"the box excludes a point proven feasible: {name} = {float(x[j])!r} outside [{float(lower[j])!r}, {float(upper[j])!r}]",
+    return (f"the box excludes a point proven feasible: {name} = {float(x[j])!r} outside "
+            f"[{float(lower[j])!r}, {float(upper[j])!r}]",
             {"parameter": name, "point": point, "box": [float(lower[j]), float(upper[j])]})
 
 
