@@ -48,7 +48,7 @@ def test_the_claims_are_the_same_on_every_path(name):
     by_name = registry.get(name)
     func = by_name.resolve()
     spec = f"{func.__module__}:{func.__name__}"
-    fields = ("kind", "rigorous", "level", "description", "citation", "context")
+    fields = registry.CLAIMS
     for other in (registry.get(spec), registry.get(func)):
         assert [getattr(other, f) for f in fields] == [getattr(by_name, f) for f in fields], other.origin
     assert by_name.origin == "built-in" and by_name.description and by_name.citation
