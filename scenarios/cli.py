@@ -280,6 +280,28 @@ def estimators(as_json: bool = typer.Option(False, "--json", help="print the lis
         typer.secho(f"{b['name']:14s} BROKEN: {b['error']}", fg=typer.colors.RED)
 
 
+@app.command("check-estimator")
+def check_estimator(
+    name: str = typer.Argument(..., help="an estimator: a name (h4bench estimators), package.module:attribute "
+                                         "(importable from the working directory) or an entry point"),
+    seed: int = typer.Option(0, help="seed of the generated problems"),
+    as_json: bool = typer.Option(False, "--json", help="print the report as JSON instead of the table"),
+) -> None:
+    """Check an estimator on generated problems against the exact hull and proven-feasible points
+    (h4bench.ident.estimators.check_estimator; docs/estimators.md). Exits 1 naming each failed check (with its
+    proof point when the box is not outer), 0 when every check passes."""
+    from h4bench.ident.estimators import check_estimator as run_checks
+
+    _importable_from_cwd(name)
+    report = run_checks(name, seed=seed)
+    typer.echo(_json_text(report.to_dict()) if as_json else report.table())
+    for r in report.failures:
+        proof = f"; proof point {r.proof['point']}" if r.proof else ""
+        typer.secho(f"failed: {r.check} on {r.problem}: {r.detail}{proof}", fg=typer.colors.RED, err=True)
+    if not report.passed:
+        raise typer.Exit(1)
+
+
 @app.command()
 def scenarios() -> None:
     """List the scenarios."""

@@ -248,7 +248,7 @@ def judge_methods(run: ExperimentRun, methods) -> None:
     :func:`scenarios.judging.run_methods`; fills ``outcomes``, ``hull_ref``, ``boxes``, ``failures``, ``seconds``."""
     eq, prior = run.equation, run.prior
     # the instruments cost one more processing pass: built only for a method that may use them
-    needs = any(not isinstance(m, str) or m == "iv" or m not in registry.BUILTINS for m in methods)
+    needs = any(registry.takes(m, "instruments") for m in methods)
     context = estimator_context(run) if needs else {"groups": np.asarray(run.equation.joint, dtype=np.int64)}
     outcomes, hull = judging.run_methods(list(methods), eq.W, eq.y, eq.bound, prior, context)
     run.outcomes = outcomes

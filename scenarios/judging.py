@@ -14,10 +14,9 @@ is known, else null), ``width_vs_hull`` (its width over the hull's, per paramete
 
 The narrower-than-hull check (:class:`HullReference`). The hull box H = [h_lo, h_hi] is the smallest box
 enclosing the feasible set S (its endpoints rigorous outer bounds). Its 2p LP solutions (the points attaining
-the endpoints, computed in floating point) are checked rigorously (outward-rounded residuals,
-``max_k |y_k - W_k x| / b_k <= 1``, and x in the prior); a point that fails is pulled towards a verified point of
-S (the mean of the LP points, else the Chebyshev centre) along the segment, ``x_t = c + t (x - c)`` for
-``t = 1 - 10^-k``, k = 12, 9, 6, 3, 2, 1, until it passes, or dropped. The proven points are in S, so per
+the endpoints, computed in floating point) are proven in S by :func:`ident.estimators.proof.proven_points`
+(outward-rounded residuals, ``max_k |y_k - W_k x| / b_k <= 1``, and x in the prior; a point that fails is pulled
+towards a verified point of S along the segment, or dropped): the same proof as ``h4bench check-estimator``. The proven points are in S, so per
 coordinate j the inner endpoints ``in_lo_j = min x_j``, ``in_hi_j = max x_j`` over them lie in the exact hull, and
 the hull's tolerance is ``tol_lo_j = in_lo_j - h_lo_j``, ``tol_hi_j = h_hi_j - in_hi_j`` (how far the exact hull
 may lie inside H). A guaranteed box B is **unsound** when in some coordinate ``B_lo_j > h_lo_j + tol_lo_j`` or
@@ -40,7 +39,7 @@ import numpy as np
 
 from h4bench import ident
 from h4bench.ident.estimators import registry
-from h4bench.ident.numerics.interval import point_matmul, up
+from h4bench.ident.estimators.proof import proven_points
 
 __all__ = ["HULL_RTOL", "HullReference", "Outcome", "clopper_pearson", "describe_estimators", "hull_reference",
            "judge", "parse_methods", "run_method", "run_methods", "summarise_methods"]
@@ -51,8 +50,6 @@ __all__ = ["HULL_RTOL", "HullReference", "Outcome", "clopper_pearson", "describe
 #: so that the looseness of the LP optimum alone never flags a sound box. On ``enclosure-critical`` the hull's
 #: widths are about 1e-13 of the endpoints, far below it: the check is silent there and the truth check decides.
 HULL_RTOL = 1e-7
-_PULLS = (1.0, 1 - 1e-12, 1 - 1e-9, 1 - 1e-6, 1 - 1e-3, 0.99, 0.9)
-_CHUNK = 8192
 
 
 @dataclass
@@ -148,18 +145,6 @@ def describe_estimators() -> dict:
             "broken": [{"name": n, "error": err} for n, err in found.broken]}
 
 
-def _scaled_residuals(W, y, b, X) -> np.ndarray:
-    """Rigorous upper bounds of ``max_k |y_k - W_k x| / b_k`` for each column x of X (p, k)."""
-    best = np.zeros(X.shape[1])
-    for s in range(0, W.shape[0], _CHUNK):
-        e = min(W.shape[0], s + _CHUNK)
-        lo, hi = point_matmul(W[s:e], X)
-        yy = y[s:e, None]
-        dev = np.maximum(up(yy - lo), up(hi - yy))
-        best = np.maximum(best, np.max(up(dev / b[s:e, None]), axis=0))
-    return best
-
-
 @dataclass
 class HullReference:
     """The exact hull as the reference of the narrower-than-hull check (module docstring).
@@ -207,38 +192,7 @@ def hull_reference(W, y, bound, prior, hull: ident.Box) -> HullReference:
     b = np.broadcast_to(np.asarray(bound, dtype=float), y.shape)
     lo, hi = np.asarray(prior.lower, float), np.asarray(prior.upper, float)
     h_lo, h_hi = np.asarray(hull.lower, float), np.asarray(hull.upper, float)
-    pts = hull.info.get("points")
-    proven = np.zeros((len(h_lo), 0))
-    if pts is not None and np.size(pts):
-        X = np.clip(np.asarray(pts, dtype=float), lo[:, None], hi[:, None])
-        ok = _scaled_residuals(W, y, b, X) <= 1.0
-        if not ok.all():
-            centres = [np.clip(X.mean(axis=1), lo, hi)]
-            centre = None
-            for c in centres:
-                if _scaled_residuals(W, y, b, c[:, None])[0] <= 1.0:
-                    centre = c
-                    break
-            if centre is None:
-                try:
-                    from h4bench.ident.estimators.hull import chebyshev
-
-                    ch = chebyshev(W, y, b, lo, hi, center=centres[0])
-                    c = np.clip(ch.theta, lo, hi)
-                    if _scaled_residuals(W, y, b, c[:, None])[0] <= 1.0:
-                        centre = c
-                except Exception:  # noqa: BLE001 - no centre: the failing points are dropped
-                    centre = None
-            if centre is not None:
-                for t in _PULLS[1:]:
-                    bad = np.flatnonzero(~ok)
-                    if not bad.size:
-                        break
-                    Xt = np.clip(centre[:, None] + t * (X[:, bad] - centre[:, None]), lo[:, None], hi[:, None])
-                    good = _scaled_residuals(W, y, b, Xt) <= 1.0
-                    X[:, bad[good]] = Xt[:, good]
-                    ok[bad[good]] = True
-        proven = X[:, ok]
+    proven = proven_points(W, y, b, lo, hi, hull.info.get("points"))
     rel = HULL_RTOL * np.maximum(np.abs(h_lo), np.abs(h_hi))
     if proven.shape[1]:
         in_lo, in_hi = proven.min(axis=1), proven.max(axis=1)

@@ -134,3 +134,12 @@ def test_every_registered_estimator_states_its_claims():
         assert est.citation, name
         assert (est.level is not None) == (est.kind == "statistical"), name
         assert f"`{name}`" in page, f"docs/estimators.md does not name the estimator {name!r}"
+
+
+def test_the_estimators_table_is_the_registrys():
+    """docs/estimators.md holds the table generated from the functions' claims (registry.claims_table), verbatim."""
+    from h4bench.ident.estimators import registry
+
+    table = registry.claims_table()
+    assert table.count("\n") == len(registry.BUILTINS) + 1
+    assert table in (DOCS / "estimators.md").read_text(), "regenerate the table: registry.claims_table()"

@@ -37,7 +37,8 @@ import numpy as np
 
 from h4bench import ident
 from h4bench.ident.numerics.lp import LPError, LPModel
-from h4bench.ident.processing.filtering import ProcessingSettings, exclude_low_speed, parallel_filter
+from h4bench.ident.processing.filtering import ProcessingSettings
+from h4bench.ident.processing.processing import select_rows
 from h4bench.trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem, grid_regressor
 
 #: Column bound of the half-width LPs: keeps every LP bounded when W is rank-deficient (then h_j = BIG).
@@ -128,21 +129,15 @@ def processed_regressor(geometry, q, qd, qdd, settings: ProcessingSettings | Non
     """The noise-free processed regressor of a reference (q, qd, qdd (n, 4) [rad, rad/s, rad/s^2]):
     ``ident.regressor`` on the reference, then the identification's parallel filter and decimation
     (``ident.processing.filtering.parallel_filter`` with ``settings.taps()``) and the same low-speed exclusion
-    (``exclude_low_speed`` + ``propagate_mask``, as ``ident.processing.processing.build_equation``).
+    (``ident.processing.processing.select_rows``, the selection of ``build_equation``).
 
     Returns (W (m, p), joint (m,) joint index of each row). The Butterworth/difference stage of the real
     processing acts on measured positions and is not modelled (the reference's derivatives are exact).
     """
     settings = settings or ProcessingSettings()
     W = ident.regressor(geometry, q, qd, qdd, structure=structure)
-    taps = settings.taps()
-    keep = exclude_low_speed(qd, settings.speed_threshold)
-    if settings.decimation == 1 and taps.size == 1:
-        rows = np.flatnonzero(keep)
-        return W[rows], rows % 4
-    fe = parallel_filter(W, np.zeros(W.shape[0]), 1.0, settings.decimation, taps=taps)
-    rows = np.flatnonzero(fe.propagate_mask(keep))
-    return fe.W[rows], rows % 4
+    fe, rows, _ = select_rows(W, np.zeros(W.shape[0]), 1.0, qd, settings, settings.taps())
+    return (W if fe is None else fe.W)[rows], rows % 4
 
 
 def as_targets(targets, p: int) -> np.ndarray:

@@ -36,7 +36,9 @@ from h4bench.trajectories.limits import InfeasibleTrajectoryError, Limits, as_li
 from h4bench.trajectories.trajectory import Trajectory
 
 TOPPRA_VERSION = importlib.metadata.version("toppra")
-_FV, _FS = slice(6, 10), slice(10, 14)  # positions in ident.PARAMETER_NAMES (checked by a test)
+# the friction parameters by their role (name), not by their position in ident.PARAMETER_NAMES
+_FV = np.array([ident.PARAMETER_NAMES.index(f"Fv{i}") for i in range(1, 5)])  # viscous, joints 1..4
+_FS = np.array([ident.PARAMETER_NAMES.index(f"Fs{i}") for i in range(1, 5)])  # Coulomb, joints 1..4
 
 
 class NominalTorqueConstraint(JointTorqueConstraint):

@@ -1,56 +1,19 @@
 """Shared argument checks of the reference estimators (the estimator protocol's inputs).
 
 Every reference estimator takes ``W`` (N, p), ``y`` (N,), ``bound`` (N,) or a scalar (the error model
-``|y - W theta| <= bound`` row by row, in y's units) and ``prior`` (an :class:`ident.Box` with finite bounds).
+``|y - W theta| <= bound`` row by row, in y's units) and ``prior`` (an :class:`ident.Box` or a ``(lower, upper)``
+pair with finite bounds), checked by :func:`~ident.estimators.checks.check_problem` (``check_inputs``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident import Box
-from h4bench.ident.estimators.checks import check_finite, real_array
+from h4bench.ident.estimators.checks import check_problem
 from h4bench.ident.numerics import interval as ia  # noqa: F401  (re-exported for the contractor)
 
 
-def _real(x, name: str, ndim: int) -> np.ndarray:
-    arr = real_array(x, name)
-    if ndim >= 0 and arr.ndim != ndim:
-        raise ValueError(f"{name} must be {ndim}-dimensional, got shape {arr.shape}")
-    check_finite(arr, name)
-    return arr
-
-
-def check_inputs(W, y, bound, prior):
-    """Validate the protocol's inputs.
-
-    Returns ``(W, y, b, lo, hi, names)``: W (N, p), y (N,), b (N,) > 0 float arrays, the prior's bounds
-    lo, hi (p,) and its names. Raises ``TypeError`` / ``ValueError`` naming the argument.
-    """
-    W = _real(W, "W", 2)
-    N, p = W.shape
-    if p < 1 or N < 1:
-        raise ValueError(f"W must have shape (N, p) with N >= 1 and p >= 1, got {W.shape}")
-    y = _real(y, "y", 1)
-    if y.shape != (N,):
-        raise ValueError(f"y must have shape (N,) = ({N},) to match W, got {y.shape}")
-    b = _real(bound, "bound", -1)
-    if b.ndim == 0:
-        b = np.full(N, float(b))
-    if b.shape != (N,):
-        raise ValueError(f"bound must be a scalar or have shape (N,) = ({N},), got shape {b.shape}")
-    if np.any(b <= 0):
-        k = int(np.flatnonzero(b <= 0)[0])
-        raise ValueError(f"bound must be > 0 in every row, got {float(b[k])!r} at row {k}")
-    if not isinstance(prior, Box):
-        raise TypeError(f"prior must be an ident.Box, got {type(prior).__name__}")
-    lo = np.array(prior.lower, dtype=float)
-    hi = np.array(prior.upper, dtype=float)
-    if lo.shape != (p,):
-        raise ValueError(f"prior must have p = {p} components to match W's columns, got {lo.size}")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise ValueError("prior must have finite bounds")
-    return W, y, b, lo, hi, tuple(prior.names)
+check_inputs = check_problem  # the one validator of the protocol's inputs (ident.estimators.checks)
 
 
 def check_groups(groups, N: int) -> np.ndarray:

@@ -1,7 +1,14 @@
 """Input checks shared by the estimators: the data ``W`` (m, p), ``y`` (m,), the error bound and the prior box.
 
 Each raises a ``TypeError`` (wrong kind of value) or ``ValueError`` (wrong value) naming the argument, what was
-expected and what came.
+expected and what came. :func:`check_problem` is the one validator of the estimator protocol's inputs: the registry
+(:func:`~ident.estimators.registry.call`) applies it to every estimator, built-in or plugin, and the estimator modules
+apply it when called directly.
+
+The rule on the number of rows: any ``N >= 1``, also ``N < p``. The prior box is bounded, so the feasible set
+``{theta in prior : |y - W theta| <= bound}`` is a bounded polytope whatever N is and its hull is defined (the
+parameters the rows do not reach keep their prior interval). An estimator that needs more rows than parameters
+(a least-squares fit, a variance estimate) says so itself with a ``ValueError``.
 """
 
 from __future__ import annotations
@@ -10,7 +17,7 @@ import numpy as np
 
 from h4bench.ident.box import Box, default_names
 
-__all__ = ["check_W_y", "check_bound", "check_finite", "check_prior", "real_array"]
+__all__ = ["check_W_y", "check_bound", "check_finite", "check_prior", "check_problem", "real_array"]
 
 
 def real_array(x, name: str) -> np.ndarray:
@@ -39,10 +46,11 @@ def check_finite(arr: np.ndarray, name: str) -> None:
 
 
 def check_W_y(W, y) -> tuple[np.ndarray, np.ndarray]:
-    """W (m, p) with m >= p >= 1 and y (m,), finite real arrays, as float arrays."""
+    """W (m, p) with m >= 1 and p >= 1 (m < p allowed: module docstring) and y (m,), finite real arrays, as float
+    arrays."""
     W = real_array(W, "W")
-    if W.ndim != 2 or W.shape[1] < 1 or W.shape[0] < W.shape[1]:
-        raise ValueError(f"W must have shape (m, p) with m >= p >= 1, got {W.shape}")
+    if W.ndim != 2 or W.shape[1] < 1 or W.shape[0] < 1:
+        raise ValueError(f"W must have shape (m, p) with m >= 1 and p >= 1, got {W.shape}")
     check_finite(W, "W")
     y = real_array(y, "y")
     if y.shape != (W.shape[0],):
@@ -86,3 +94,16 @@ def check_prior(prior, p: int) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]
         bad = [names[i] for i in np.flatnonzero(lo > hi)]
         raise ValueError(f"prior lower must be <= upper, violated for {bad}")
     return lo, hi, tuple(names)
+
+
+def check_problem(W, y, bound, prior):
+    """The estimator protocol's inputs checked and converted (module docstring).
+
+    W (N, p) and y (N,) finite reals with N >= 1, bound a scalar or (N,) finite and > 0, prior a Box or a
+    ``(lower, upper)`` pair of (p,) finite arrays. Returns ``(W, y, b, lo, hi, names)``: float arrays, b (N,),
+    the prior's bounds (p,) and names. Raises TypeError / ValueError naming the argument.
+    """
+    W, y = check_W_y(W, y)
+    b, _ = check_bound(bound, W.shape[0])
+    lo, hi, names = check_prior(prior, W.shape[1])
+    return W, y, b, lo, hi, names

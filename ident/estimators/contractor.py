@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from h4bench.ident import Box
+from h4bench.ident.estimators.registry import declare
 from h4bench.ident.estimators._common import check_inputs, inconsistent, ia
 
 __all__ = ["contract", "contractor"]
@@ -77,6 +78,10 @@ def contract(W, y, b, lo, hi, *, tol: float = 1e-6, max_sweeps: int = 500):
     return lo, hi, sweeps
 
 
+@declare(kind="guaranteed", rigorous=True, context=(),
+         description="forward-backward interval contractor on the strips, Jacobi sweeps to a fixed point",
+         citation="L. Jaulin, M. Kieffer, O. Didrit, E. Walter, Applied Interval Analysis, Springer, 2001, "
+                  "ch. 4 (projection / forward-backward contractors)")
 def contractor(W, y, bound, prior, *, tol: float = 1e-6, max_sweeps: int = 500) -> Box:
     """Forward-backward interval contractor of the feasible set, iterated to a fixed point (rigorous).
 
@@ -114,10 +119,3 @@ def contractor(W, y, bound, prior, *, tol: float = 1e-6, max_sweeps: int = 500) 
     return Box(clo, chi, names, info={"method": "contractor", "sweeps": sweeps,
                                       "set": {"type": "zonotope", "center": centre.tolist(),
                                               "generators": np.diag(0.5 * (chi - clo)).tolist()}})
-
-
-contractor.kind = "guaranteed"
-contractor.rigorous = True
-contractor.description = "forward-backward interval contractor on the strips, Jacobi sweeps to a fixed point"
-contractor.citation = ("L. Jaulin, M. Kieffer, O. Didrit, E. Walter, Applied Interval Analysis, Springer, 2001, "
-                       "ch. 4 (projection / forward-backward contractors)")

@@ -36,6 +36,7 @@ import math
 import numpy as np
 
 from h4bench.ident import Box
+from h4bench.ident.estimators.registry import declare
 from h4bench.ident.estimators._common import check_inputs, inconsistent, set_box
 
 __all__ = ["ellipsoid", "strip_update"]
@@ -94,6 +95,10 @@ def strip_update(c, P, w, lo_k, hi_k):
     return c, P, True
 
 
+@declare(kind="guaranteed", rigorous=False, context=(),
+         description="optimal bounding ellipsoid: recursive minimum-volume strip updates (not rigorous in fp)",
+         citation="E. Fogel, Y. F. Huang, On the value of information in system identification - bounded noise "
+                  "case, Automatica 18(2):229-238, 1982")
 def ellipsoid(W, y, bound, prior) -> Box:
     """Optimal bounding ellipsoid (Fogel & Huang 1982): recursive minimum-volume strip updates.
 
@@ -136,10 +141,3 @@ def ellipsoid(W, y, bound, prior) -> Box:
     rad = np.sqrt(np.maximum(np.diag(P), 0.0)) * inflate
     return set_box("ellipsoid", c, rad, lo, hi, names, W, y, b, prior,
                    {"type": "ellipsoid", "center": c.tolist(), "shape": P.tolist()}, cuts=cuts)
-
-
-ellipsoid.kind = "guaranteed"
-ellipsoid.rigorous = False
-ellipsoid.description = "optimal bounding ellipsoid: recursive minimum-volume strip updates (not rigorous in fp)"
-ellipsoid.citation = ("E. Fogel, Y. F. Huang, On the value of information in system identification - bounded noise "
-                      "case, Automatica 18(2):229-238, 1982")

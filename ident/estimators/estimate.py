@@ -42,9 +42,7 @@ __all__ = [
     "min_consistent_bound",
 ]
 
-METHODS = tuple(registry.BUILTINS)  # the built-in set-membership methods, read from the one registry
-
-
+METHODS = ("hull", "cgsp")  # the set-membership methods :func:`_builtin_estimate` runs (registered as built-ins)
 
 
 # ------------------------------------------------------------------------------------------- validation
@@ -213,6 +211,7 @@ def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consist
     W, y = check_W_y(W, y)
     n, p = W.shape
     b, scalar = check_bound(bound, n)
+    scalar = scalar or bool(np.all(b == b[0]))  # one bound for every row (the registry passes it as (n,))
     lo, hi, names = check_prior(prior, p)
     bl, bu = strip_bounds(y, b)
 
@@ -268,12 +267,20 @@ def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consist
     return Box(lower=lower, upper=upper, names=names, info=info)
 
 
+@registry.declare(kind="guaranteed", rigorous=True, context=("check_consistency",),
+                  description="the exact interval hull of the feasible set: 2p linear programs with safe dual bounds",
+                  citation="A. Neumaier, O. Shcherbina, Safe bounds in linear and mixed-integer linear programming, "
+                           "Math. Program. 99:283-296, 2004")
 def hull_estimator(W, y, bound, prior, *, check_consistency: bool = True) -> Box:
     """The built-in ``"hull"`` (:func:`_builtin_estimate` with ``method="hull"``; ``check_consistency`` is
     accepted for symmetry: the hull always decides emptiness)."""
     return _builtin_estimate(W, y, bound, prior, "hull", check_consistency=check_consistency)
 
 
+@registry.declare(kind="guaranteed", rigorous=True, context=("check_consistency",),
+                  description="the paper's preconditioned interval Gauss-Seidel on Rump's system (an outer box)",
+                  citation="P. Poignet, N. Ramdani, O. A. Vivas, Robust estimation of parallel robot dynamic "
+                           "parameters with interval analysis, IEEE CDC 2003 (sec. 3); S. M. Rump (2002)")
 def cgsp_estimator(W, y, bound, prior, *, check_consistency: bool = True) -> Box:
     """The built-in ``"cgsp"`` (:func:`_builtin_estimate` with ``method="cgsp"``)."""
     return _builtin_estimate(W, y, bound, prior, "cgsp", check_consistency=check_consistency)

@@ -399,15 +399,17 @@ class ChebyshevResult:
 
 
 def scaled_residual_upper(W, y, w, theta):
-    """Rigorous upper bound of ``max_k |y_k - W_k theta| / w_k`` for a float vector theta."""
-    best = 0.0
-    n = W.shape[0]
-    for s in range(0, n, _CHUNK):
-        e = min(n, s + _CHUNK)
-        alo, ahi = point_matmul(W[s:e], theta)
-        dev = np.maximum(up(y[s:e] - alo), up(ahi - y[s:e]))
-        best = max(best, float(np.max(up(dev / w[s:e]))))
-    return best
+    """Rigorous upper bound of ``max_k |y_k - W_k theta| / w_k`` for a float vector theta (p,) (a float), or for
+    each column of theta (p, m) (an (m,) array)."""
+    X = np.asarray(theta, dtype=float)
+    yy, ww = (y, w) if X.ndim == 1 else (y[:, None], w[:, None])
+    best = np.zeros(X.shape[1:])
+    for s in range(0, W.shape[0], _CHUNK):
+        e = min(W.shape[0], s + _CHUNK)
+        alo, ahi = point_matmul(W[s:e], X)
+        dev = np.maximum(up(yy[s:e] - alo), up(ahi - yy[s:e]))
+        best = np.maximum(best, np.max(up(dev / ww[s:e]), axis=0))
+    return float(best) if X.ndim == 1 else best
 
 
 def _chebyshev_first_rows(e0, w, initial_rows: int) -> np.ndarray:

@@ -2,20 +2,26 @@
 
 An estimator is a callable ``f(W, y, bound, prior, **context) -> ident.Box`` with ``W`` (N, p), ``y`` (N,),
 ``bound`` (N,) > 0 (the error model ``|y - W theta| <= bound`` row by row, in y's units) and ``prior`` a Box with
-finite bounds. Optional context keywords, passed only when the callable's signature accepts them (a named
-parameter or ``**kwargs``): ``groups`` ((N,) ints: which joint/output each row belongs to) and ``instruments``
-((N, p) floats, row-aligned with W). Optional attributes of the callable: ``kind`` (``"guaranteed"``, the default:
-an outer enclosure of ``{theta in prior : |y - W theta| <= bound}``; or ``"statistical"``: a confidence box),
-``level`` (a statistical box's confidence level in (0, 1)), ``rigorous`` (True only if every rounding is outward;
-default False for plugins), ``description`` (one line) and ``citation``. Raising
-:class:`~ident.InconsistentDataError` means "proven empty". The Box's ``info["set"]`` may carry the set itself
-(``{"type": "ellipsoid", "center", "shape"}`` or ``{"type": "zonotope", "center", "generators"}``).
+finite bounds. Raising :class:`~ident.InconsistentDataError` means "proven empty". The Box's ``info["set"]`` may
+carry the set itself (``{"type": "ellipsoid", "center", "shape"}`` or ``{"type": "zonotope", "center",
+"generators"}``).
 
-Where an estimator comes from (:func:`get`): a built-in name (:data:`BUILTINS`: ``hull``, ``cgsp``), the name of an
+**Its claims, stated once**, as attributes of the callable (set by the :func:`declare` decorator, or by hand):
+``kind`` (``"guaranteed"``, the default: an outer enclosure of ``{theta in prior : |y - W theta| <= bound}``; or
+``"statistical"``: a confidence box), ``level`` (a statistical box's confidence level in (0, 1)), ``rigorous``
+(True only if every rounding is outward; default False), ``description`` (one line), ``citation`` and ``context``
+(the context keywords it takes, e.g. ``("groups",)``). The registry reads them from the callable whichever way it
+is resolved (a built-in name, ``module:attribute``, an entry point, the callable itself), so the claims are the
+same on every path. Without a declared ``context`` the callable's signature decides: its named keyword parameters,
+and :data:`CONTEXT_KEYWORDS` when it takes ``**kwargs``. :func:`call` passes an estimator only the context it takes.
+
+Where an estimator comes from (:func:`get`): a built-in name (:data:`BUILTINS`: ``hull``, ``cgsp``, ...), the name of an
 entry point of group :data:`ENTRY_POINT_GROUP` in an installed distribution (``[project.entry-points.
 "h4bench.estimators"] name = "package.module:function"``), a ``"package.module:attribute"`` string, or the callable
 itself. :func:`available` lists the built-ins and the entry points, and the entry points that fail to load as
-broken (name, error) instead of raising. :func:`call` passes the accepted context and checks the returned box.
+broken (name, error) instead of raising. :func:`call` checks the inputs with the one validator
+(:func:`~ident.estimators.checks.check_problem`, the same for built-ins and plugins), passes the accepted context and
+checks the returned box.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import inspect
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Callable, NamedTuple
 
@@ -30,14 +37,15 @@ import numpy as np
 
 from h4bench.ident.box import Box
 from h4bench.ident.errors import EstimatorError
-from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y, real_array
+from h4bench.ident.estimators.checks import check_problem, real_array
 
-__all__ = ["BUILTINS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS", "Available", "Estimator", "available",
-           "call", "get", "register"]
+__all__ = ["BUILTINS", "CLAIMS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS", "Available", "Estimator",
+           "available", "call", "claims_table", "declare", "get", "register", "takes"]
 
 ENTRY_POINT_GROUP = "h4bench.estimators"
 KINDS = ("guaranteed", "statistical")
-CONTEXT_KEYWORDS = ("groups", "instruments")
+CONTEXT_KEYWORDS = ("groups", "instruments")  #: the public context, passed to a ``**kwargs`` estimator
+CLAIMS = ("kind", "rigorous", "level", "description", "citation", "context")  #: the attributes that are claims
 
 
 @dataclass(frozen=True)
@@ -45,8 +53,8 @@ class Estimator:
     """A resolved estimator: its name, the callable and what it claims.
 
     ``origin``: ``"built-in"``, ``"entry point <distribution>"``, ``"module:attribute"`` (the string it was loaded
-    from) or ``"callable"``. ``func`` of a built-in may be a ``"module:attribute"`` string until first use
-    (:meth:`resolve`), so that the registry imports no estimator module.
+    from) or ``"callable"``. The claims (``kind`` ... ``context``) are the callable's own (module docstring);
+    ``context`` the keywords :func:`call` passes it.
     """
 
     name: str
@@ -57,6 +65,7 @@ class Estimator:
     description: str = ""
     citation: str = ""
     origin: str = "callable"
+    context: tuple[str, ...] = ()
 
     def resolve(self) -> Callable:
         """The callable (imported on first use for a built-in given as ``"module:attribute"``)."""
@@ -70,7 +79,32 @@ class Available(NamedTuple):
     broken: tuple[tuple[str, str], ...]
 
 
-BUILTINS: dict[str, Estimator] = {}
+class _Builtins(Mapping):
+    """The built-in estimators by name: ``"module:attribute"`` strings imported on first look-up (so that importing
+    the registry imports no estimator module), their claims read from the callable."""
+
+    def __init__(self) -> None:
+        self._specs: dict[str, Callable | str] = {}
+        self._resolved: dict[str, Estimator] = {}
+
+    def add(self, name: str, func: Callable | str) -> None:
+        self._specs[name] = func
+
+    def __getitem__(self, name: str) -> Estimator:
+        if name not in self._resolved:
+            func = self._specs[name]
+            self._resolved[name] = _from_callable(_load(func, name) if isinstance(func, str) else func, name,
+                                                  "built-in")
+        return self._resolved[name]
+
+    def __iter__(self):
+        return iter(self._specs)
+
+    def __len__(self) -> int:
+        return len(self._specs)
+
+
+BUILTINS: Mapping[str, Estimator] = _Builtins()
 
 
 def _check_claims(name: str, kind, level, rigorous) -> None:
@@ -85,22 +119,39 @@ def _check_claims(name: str, kind, level, rigorous) -> None:
         raise EstimatorError(f"estimator {name!r}: rigorous must be True or False, got {rigorous!r}")
 
 
-def register(name: str, func: Callable | str, *, kind: str = "guaranteed", rigorous: bool = False,
-             level: float | None = None, description: str = "", citation: str = "") -> Estimator:
-    """Register a built-in estimator under ``name`` (``func`` a callable or a ``"module:attribute"`` string).
+def declare(*, kind: str = "guaranteed", rigorous: bool = False, level: float | None = None, description: str = "",
+            citation: str = "", context=None):
+    """Decorator stating an estimator's claims once, as the attributes the registry reads (module docstring).
 
-    Raises ValueError if the name is taken or not an identifier-like string, EstimatorError for claims that do not
-    fit (unknown kind, a statistical box without a level in (0, 1)).
+    kind : ``"guaranteed"`` or ``"statistical"``; rigorous : True only if every rounding is outward; level : a
+    statistical box's confidence level in (0, 1) (None for guaranteed); description : one line; citation : the
+    paper; context : the context keywords the estimator takes (a tuple of names; None: its signature decides).
+    Raises EstimatorError for claims that do not fit (checked again when the registry reads them).
+    """
+    def mark(func: Callable) -> Callable:
+        name = getattr(func, "__name__", type(func).__name__)
+        _check_claims(name, kind, level, rigorous)
+        func.kind, func.rigorous, func.level = kind, rigorous, None if level is None else float(level)
+        func.description, func.citation = description, citation
+        if context is not None:
+            func.context = tuple(context)
+        _context_of(func, name)  # a declared keyword the signature does not take is an error now, not at a call
+        return func
+
+    return mark
+
+
+def register(name: str, func: Callable | str) -> None:
+    """Register a built-in estimator under ``name`` (``func`` a callable or a ``"module:attribute"`` string, imported
+    on first use). Its claims are the callable's own attributes (:func:`declare`), read when it is first looked up.
+
+    Raises ValueError if the name is taken or not a non-empty string without ``':'``.
     """
     if not isinstance(name, str) or not name or ":" in name:
         raise ValueError(f"name must be a non-empty string without ':', got {name!r}")
     if name in BUILTINS:
         raise ValueError(f"estimator {name!r} is already registered")
-    _check_claims(name, kind, level, rigorous)
-    est = Estimator(name, func, kind, rigorous, None if level is None else float(level), description, citation,
-                    "built-in")
-    BUILTINS[name] = est
-    return est
+    BUILTINS.add(name, func)
 
 
 def _load(spec: str, name: str) -> Callable:
@@ -123,13 +174,41 @@ def _load(spec: str, name: str) -> Callable:
     return obj
 
 
+def _keywords(func: Callable) -> tuple[tuple[str, ...], bool]:
+    """The named keyword parameters of ``func`` after its four positional ones, and whether it takes ``**kwargs``."""
+    try:
+        params = list(inspect.signature(func).parameters.values())
+    except (TypeError, ValueError):  # no signature (some builtins): no context
+        return (), False
+    named = tuple(p.name for p in params[4:] if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD,
+                                                            inspect.Parameter.KEYWORD_ONLY))
+    return named, any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
+
+
+def _context_of(func: Callable, name: str) -> tuple[str, ...]:
+    """The context keywords ``func`` takes: its declared ``context`` (each one a keyword its signature accepts),
+    else its named keyword parameters plus :data:`CONTEXT_KEYWORDS` when it takes ``**kwargs``."""
+    named, var = _keywords(func)
+    declared = getattr(func, "context", None)
+    if declared is None:
+        return tuple(dict.fromkeys((*named, *(CONTEXT_KEYWORDS if var else ()))))
+    if isinstance(declared, str) or not all(isinstance(k, str) for k in declared):
+        raise EstimatorError(f"estimator {name!r}: context must be a tuple of keyword names, got {declared!r}")
+    missing = [k for k in declared if k not in named and not var]
+    if missing:
+        raise EstimatorError(f"estimator {name!r} declares the context {missing} that its signature does not take")
+    return tuple(declared)
+
+
 def _from_callable(func: Callable, name: str, origin: str) -> Estimator:
+    """The Estimator of ``func`` with the claims read from its attributes (the one place that reads them)."""
     kind = getattr(func, "kind", "guaranteed")
     level = getattr(func, "level", None)
     rigorous = getattr(func, "rigorous", False)
     _check_claims(name, kind, level, rigorous)
     return Estimator(name, func, kind, rigorous, None if level is None else float(level),
-                     str(getattr(func, "description", "") or ""), str(getattr(func, "citation", "") or ""), origin)
+                     str(getattr(func, "description", "") or ""), str(getattr(func, "citation", "") or ""), origin,
+                     _context_of(func, name))
 
 
 def _entry_points() -> list:
@@ -190,18 +269,6 @@ def get(method) -> Estimator:
                          f"'package.module:attribute' or a callable), got {method!r}")
 
 
-def _accepted(func: Callable, context: dict) -> dict:
-    try:
-        params = inspect.signature(func).parameters.values()
-    except (TypeError, ValueError):  # no signature (some builtins): pass no context
-        return {}
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
-        return dict(context)
-    named = {p.name for p in params if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD,
-                                                   inspect.Parameter.KEYWORD_ONLY)}
-    return {k: v for k, v in context.items() if k in named}
-
-
 def _check_context(context: dict, n: int, p: int) -> dict:
     out = dict(context)
     if out.get("groups") is not None:
@@ -242,58 +309,52 @@ def _check_result(est: Estimator, box, p: int, names: tuple[str, ...] | None = N
     return box if isinstance(box, Box) else Box(lower, upper, names)
 
 
-def call(est, W, y, bound, prior, **context) -> Box:
-    """Run an estimator (anything :func:`get` resolves) and check its box.
+def claims_table() -> str:
+    """The built-ins' claims as the Markdown table of ``docs/estimators.md`` (a test checks the page holds it)."""
+    rows = ["| name | kind | rigorous | context | what it is | citation |", "|---|---|---|---|---|---|"]
+    for est in BUILTINS.values():
+        kind = est.kind if est.level is None else f"{est.kind}, {est.level:g}"
+        context = ", ".join(f"`{k}`" for k in est.context) or "-"
+        rows.append(f"| `{est.name}` | {kind} | {'yes' if est.rigorous else 'no'} | {context} | {est.description} "
+                    f"| {est.citation} |")
+    return "\n".join(rows)
 
-    W (N, p), y (N,), bound (a scalar or (N,) > 0), prior a Box or a (lower, upper) pair; context: keywords
-    passed only if the callable accepts them (``groups``, ``instruments``, a built-in's ``check_consistency``).
-    A built-in receives the arguments as given (it checks them itself, with the same messages); a plugin
-    receives them checked and converted (float arrays, bound (N,), prior a Box with the prior's names).
-    Returns the Box (a plugin may also return a ``(lower, upper)`` pair: it becomes a Box with the prior's names);
-    EstimatorError naming the estimator if it is not a box of the prior's shape, finite, with lower <= upper.
+
+def takes(method, keyword: str) -> bool:
+    """Whether ``method`` (anything :func:`get` resolves) takes the context ``keyword`` (:attr:`Estimator.context`);
+    False for a method that cannot be resolved (running it reports why)."""
+    try:
+        return keyword in get(method).context
+    except (TypeError, ValueError):
+        return False
+
+
+def call(est, W, y, bound, prior, **context) -> Box:
+    """Run an estimator (anything :func:`get` resolves) on checked inputs and check its box.
+
+    W (N, p), y (N,), bound (a scalar or (N,) > 0), prior a Box or a (lower, upper) pair: checked by the one
+    validator, :func:`~ident.estimators.checks.check_problem` (N >= 1, also N < p), the same for every estimator;
+    the estimator receives them converted (float arrays, bound (N,), prior a Box with the prior's names).
+    context : keywords, each passed only to an estimator that takes it (:attr:`Estimator.context`): ``groups``,
+    ``instruments``, a built-in's ``check_consistency``, ...; ``groups`` and ``instruments`` are checked.
+    Returns the Box (an estimator may also return a ``(lower, upper)`` pair: it becomes a Box with the prior's
+    names); EstimatorError naming the estimator if it is not a box of the prior's shape, finite, with lower <= upper.
     """
     est = get(est)
     func = est.resolve()
-    if est.origin == "built-in":
-        box = func(W, y, bound, prior, **_accepted(func, context))
-        return _check_result(est, box, np.shape(W)[1])
-    W, y = check_W_y(W, y)
-    b, _ = check_bound(bound, W.shape[0])
-    lo, hi, names = check_prior(prior, W.shape[1])
-    context = _check_context(context, *W.shape)
-    box = func(W, y, b, Box(lo, hi, names), **_accepted(func, context))
+    W, y, b, lo, hi, names = check_problem(W, y, bound, prior)
+    context = _check_context({k: v for k, v in context.items() if k in est.context}, *W.shape)
+    box = func(W, y, b, Box(lo, hi, names), **context)
     return _check_result(est, box, W.shape[1], names)
 
 
-register("hull", "h4bench.ident.estimators.estimate:hull_estimator", kind="guaranteed", rigorous=True,
-         description="the exact interval hull of the feasible set: 2p linear programs with safe dual bounds",
-         citation="Neumaier & Shcherbina, Math. Program. 99 (2004): safe bounds in linear programming")
-register("cgsp", "h4bench.ident.estimators.estimate:cgsp_estimator", kind="guaranteed", rigorous=True,
-         description="the paper's preconditioned interval Gauss-Seidel on Rump's system (an outer box)",
-         citation="Poignet, Ramdani & Vivas (CDC 2003, sec. 3); Rump (2002)")
-
-# the reference estimators of the bounded-error literature and the statistical references (their modules carry
-# the same claims as attributes; tests/ident/estimators/test_protocol.py checks the two agree)
-register("ellipsoid", "h4bench.ident.estimators.ellipsoid:ellipsoid", kind="guaranteed", rigorous=False,
-         description="optimal bounding ellipsoid: recursive minimum-volume strip updates (not rigorous in fp)",
-         citation="Fogel & Huang, Automatica 18(2):229-238, 1982")
-register("zonotope", "h4bench.ident.estimators.zonotope:zonotope", kind="guaranteed", rigorous=False,
-         description="zonotope by sequential strip intersection (F-radius), order reduction to 3 p generators "
-                     "(not rigorous in fp)",
-         citation="Alamo, Bravo & Camacho, Automatica 41(6):1035-1043, 2005; Bravo, Alamo & Camacho, IEEE TAC "
-                  "51(7):1144-1150, 2006")
-register("parallelotope", "h4bench.ident.estimators.zonotope:parallelotope", kind="guaranteed", rigorous=False,
-         description="minimum-volume parallelotope by sequential strip intersection (not rigorous in fp)",
-         citation="Chisci, Garulli & Zappa, Automatica 32(7):1049-1055, 1996")
-register("contractor", "h4bench.ident.estimators.contractor:contractor", kind="guaranteed", rigorous=True,
-         description="forward-backward interval contractor on the strips, Jacobi sweeps to a fixed point",
-         citation="Jaulin, Kieffer, Didrit & Walter, Applied Interval Analysis, Springer 2001, ch. 4")
-register("ols", "h4bench.ident.estimators.statistical:ols", kind="statistical", rigorous=False, level=0.95,
-         description="least squares, 95 % Bonferroni confidence box (Gaussian homoscedastic errors)",
-         citation="ordinary least squares; Bonferroni simultaneous t intervals")
-register("wls", "h4bench.ident.estimators.statistical:wls", kind="statistical", rigorous=False, level=0.95,
-         description="Gautier's per-joint weighted least squares, 95 % Bonferroni confidence box",
-         citation="Gautier & Poignet, Control Engineering Practice 9(12):1361-1372, 2001")
-register("iv", "h4bench.ident.estimators.statistical:iv", kind="statistical", rigorous=False, level=0.95,
-         description="instrumental variables (IDIM-IV), 95 % Bonferroni confidence box (asymptotic)",
-         citation="Janot, Vandanjon & Gautier, IEEE TCST 22(1):132-145, 2014")
+# The built-ins: each module states its claims on the function (``declare``); the registry only names them.
+register("hull", "h4bench.ident.estimators.estimate:hull_estimator")
+register("cgsp", "h4bench.ident.estimators.estimate:cgsp_estimator")
+register("ellipsoid", "h4bench.ident.estimators.ellipsoid:ellipsoid")
+register("zonotope", "h4bench.ident.estimators.zonotope:zonotope")
+register("parallelotope", "h4bench.ident.estimators.zonotope:parallelotope")
+register("contractor", "h4bench.ident.estimators.contractor:contractor")
+register("ols", "h4bench.ident.estimators.statistical:ols")
+register("wls", "h4bench.ident.estimators.statistical:wls")
+register("iv", "h4bench.ident.estimators.statistical:iv")

@@ -15,7 +15,8 @@ unclipped).
   squares dynamic identification of robot", Control Eng. Practice 9(12), 2001): e Gaussian, independent,
   zero-mean, with one variance per group (context ``groups``, e.g. the joint of each row; one group if
   absent). ``sigma_j^2 = |Y_j - W_j theta_j|^2 / (r_j - rank(W_j))`` from the OLS fit of the group's own rows,
-  rows weighted by ``1 / sigma_j``, then OLS on the weighted system.
+  rows weighted by ``1 / sigma_j``, then OLS on the weighted system: :func:`ident.estimators.wls.wls`, the one
+  implementation (its rank test and its errors: :class:`~ident.UnidentifiableError` for a rank-deficient W).
 * :func:`iv`: instrumental variables (Janot, Vandanjon & Gautier, "A generic instrumental variable approach
   for industrial robot identification", IEEE TCST 22(1):132-145, 2014, IDIM-IV): with instruments Z (N, p)
   (context ``instruments``, e.g. the regressor evaluated on the reference motion), ``theta = (Z^T W)^-1 Z^T y``,
@@ -30,6 +31,8 @@ from scipy import stats
 
 from h4bench.ident import Box
 from h4bench.ident.estimators._common import check_groups, check_inputs
+from h4bench.ident.estimators.registry import declare
+from h4bench.ident.estimators.wls import wls as gautier_wls
 
 __all__ = ["iv", "iv_at", "ols", "ols_at", "wls", "wls_at"]
 
@@ -85,30 +88,12 @@ def _ols(W, y, bound, prior, level):
 
 
 def _wls(W, y, bound, prior, groups, level):
+    """Gautier's WLS is :func:`ident.estimators.wls.wls` (the one implementation), its groups as the joints."""
     W, y, b, lo, hi, names = check_inputs(W, y, bound, prior)
-    N, p = W.shape
-    g = check_groups(groups, N)
-    labels = np.unique(g)
-    sigma = np.empty(labels.size)
-    for i, j in enumerate(labels):
-        rows = g == j
-        Wj, yj = W[rows], y[rows]
-        sol, _, rank, _ = np.linalg.lstsq(Wj, yj, rcond=None)
-        dof_j = Wj.shape[0] - int(rank)
-        if dof_j < 1:
-            raise ValueError(f"wls: group {j} has {Wj.shape[0]} rows for rank {rank}: no residual to estimate its "
-                             "variance")
-        rj = yj - Wj @ sol
-        sigma[i] = np.sqrt(float(rj @ rj) / dof_j)
-        if not sigma[i] > 0.0:
-            raise ValueError(f"wls: group {j}'s own least-squares residual is zero, its weight 1/sigma is undefined")
-    weight = 1.0 / sigma[np.searchsorted(labels, g)]
-    if N <= p:
-        raise ValueError(f"wls needs more rows than parameters, got W of shape {W.shape}")
-    theta, inv, r = _ls(W * weight[:, None], y * weight)
-    s2 = float(r @ r) / (N - p)
-    return _confidence(theta, s2 * inv, N - p, level, lo, hi, names, "wls",
-                       {"s2": s2, "group_sigma": sigma.tolist(), "groups": labels.tolist()})
+    labels, joint_of_row = np.unique(check_groups(groups, W.shape[0]), return_inverse=True)
+    res = gautier_wls(W, y, labels.size, names=names, joint_of_row=joint_of_row)
+    return _confidence(res.theta, res.cov, res.dof, level, lo, hi, names, "wls",
+                       {"s2": res.s2, "group_sigma": res.joint_sigma.tolist(), "groups": labels.tolist()})
 
 
 def _iv(W, y, bound, prior, instruments, level):
@@ -149,13 +134,15 @@ _CLAIMS = {  # name: (description with {pct} for the level, citation)
 }
 
 
+_CONTEXT = {"ols": (), "wls": ("groups",), "iv": ("instruments",)}  # the context keywords each one takes
+
+
 def _attach(f, name: str, level: float, suffix: str = ""):
-    """Set the registry's claims of the statistical estimator ``name`` at ``level`` on ``f``; returns ``f``."""
+    """Declare the claims of the statistical estimator ``name`` at ``level`` on ``f``; returns ``f``."""
     description, citation = _CLAIMS[name]
     f.__name__ = name + suffix
-    f.kind, f.rigorous, f.level = "statistical", False, level
-    f.description, f.citation = description.format(pct=f"{100 * level:g}"), citation
-    return f
+    return declare(kind="statistical", rigorous=False, level=level, context=_CONTEXT[name], citation=citation,
+                   description=description.format(pct=f"{100 * level:g}"))(f)
 
 
 def ols_at(level: float):

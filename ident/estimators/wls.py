@@ -36,7 +36,8 @@ class WLSResult:
     (``inf`` where theta is exactly 0); joint_sigma : (joints,) per-joint residual standard deviations used
     as weights (units of y); s2 : residual variance of the weighted system (dimensionless); dof : r - c;
     cond : condition number of the column-equilibrated weighted regressor; poorly_identified : names whose
-    direction has a singular value below ``1e-8`` of the largest (determined, but barely).
+    direction has a singular value below ``1e-8`` of the largest (determined, but barely); cov : (p, p) the
+    covariance ``C = s2 (W_w^T W_w)^-1`` of theta (``std = sqrt(diag C)``), or None.
     """
 
     theta: np.ndarray
@@ -48,6 +49,7 @@ class WLSResult:
     dof: int
     cond: float
     poorly_identified: tuple[str, ...] = ()
+    cov: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -138,8 +140,8 @@ def wls(W, y, joints: int = 4, *, names=None, joint_of_row=None) -> WLSResult:
     dof = m - p
     s2 = float(resid @ resid) / dof
     Vs = V / s  # C = s2 D^-1 V diag(1/s^2) V^T D^-1
-    cov_diag = s2 * np.einsum("ij,ij->i", Vs, Vs) / d**2
-    std = np.sqrt(cov_diag)
+    cov = s2 * (Vs @ Vs.T) / d[:, None] / d[None, :]
+    std = np.sqrt(s2 * np.einsum("ij,ij->i", Vs, Vs) / d**2)
     with np.errstate(divide="ignore"):
         rel = np.where(theta != 0.0, 100.0 * std / np.abs(np.where(theta != 0.0, theta, 1.0)), np.inf)
     weak = s < 1e-8 * s[0]
@@ -153,4 +155,5 @@ def wls(W, y, joints: int = 4, *, names=None, joint_of_row=None) -> WLSResult:
         dof=dof,
         cond=float(s[0] / s[-1]),
         poorly_identified=_null_names(V, weak, names),
+        cov=cov,
     )

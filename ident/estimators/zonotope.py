@@ -44,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from h4bench.ident import Box
+from h4bench.ident.estimators.registry import declare
 from h4bench.ident.estimators._common import check_inputs, inconsistent, set_box
 
 __all__ = ["parallelotope", "zonotope", "zonotope_at"]
@@ -129,14 +130,15 @@ def zonotope_at(order: int):
 
     estimator.__name__ = f"zonotope_order{int(order)}"
     estimator.__doc__ = zonotope.__doc__
-    estimator.kind = "guaranteed"
-    estimator.rigorous = False
-    estimator.description = (f"zonotope by sequential strip intersection (F-radius), order reduction to "
-                             f"{int(order)} p generators (not rigorous in fp)")
-    estimator.citation = zonotope.citation
-    return estimator
+    return declare(kind=zonotope.kind, rigorous=zonotope.rigorous, context=(), citation=zonotope.citation,
+                   description=zonotope.description.replace("to 3 p", f"to {int(order)} p"))(estimator)
 
 
+@declare(kind="guaranteed", rigorous=False, context=(),
+         description="zonotope by sequential strip intersection (F-radius), order reduction to 3 p generators "
+                     "(not rigorous in fp)",
+         citation="T. Alamo, J. M. Bravo, E. F. Camacho, Guaranteed state estimation by zonotopes, Automatica "
+                  "41(6):1035-1043, 2005; J. M. Bravo, T. Alamo, E. F. Camacho, IEEE TAC 51(7):1144-1150, 2006")
 def zonotope(W, y, bound, prior, *, order: int = 3) -> Box:
     """Zonotope outer bound by sequential strip intersection (Alamo, Bravo & Camacho 2005).
 
@@ -160,14 +162,12 @@ def zonotope(W, y, bound, prior, *, order: int = 3) -> Box:
     return _zonotope(W, y, bound, prior, order)
 
 
-zonotope.kind = "guaranteed"
-zonotope.rigorous = False
-zonotope.description = ("zonotope by sequential strip intersection (F-radius), order reduction to 3 p generators "
-                        "(not rigorous in fp)")
-zonotope.citation = ("T. Alamo, J. M. Bravo, E. F. Camacho, Guaranteed state estimation by zonotopes, Automatica "
-                     "41(6):1035-1043, 2005; J. M. Bravo, T. Alamo, E. F. Camacho, IEEE TAC 51(7):1144-1150, 2006")
 
 
+@declare(kind="guaranteed", rigorous=False, context=(),
+         description="minimum-volume parallelotope by sequential strip intersection (not rigorous in fp)",
+         citation="L. Chisci, A. Garulli, G. Zappa, Recursive state bounding by parallelotopes, Automatica "
+                  "32(7):1049-1055, 1996")
 def parallelotope(W, y, bound, prior) -> Box:
     """Minimum-volume parallelotope by sequential strip intersection (Chisci, Garulli & Zappa 1996).
 
@@ -205,10 +205,3 @@ def parallelotope(W, y, bound, prior) -> Box:
         G[:, j] = bk * lam
         cuts += 1
     return _zonotope_box('parallelotope', c, G, lo, hi, names, W, y, b, prior, cuts=cuts)
-
-
-parallelotope.kind = "guaranteed"
-parallelotope.rigorous = False
-parallelotope.description = "minimum-volume parallelotope by sequential strip intersection (not rigorous in fp)"
-parallelotope.citation = ("L. Chisci, A. Garulli, G. Zappa, Recursive state bounding by parallelotopes, Automatica "
-                          "32(7):1049-1055, 1996")

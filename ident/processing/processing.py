@@ -111,6 +111,23 @@ def _too_slow(kept_raw: int, total_raw: int, threshold: float) -> ProcessingErro
         f"a whole window; the robot must move continuously during the log")
 
 
+def select_rows(w, y, bound, qd, settings: ProcessingSettings, taps, theta_abs_max=None):
+    """The rows of a record (or block) that the identification keeps, as :func:`build_equation` selects them.
+
+    w (4n, p) raw regressor rows (row 4k + i = sample k, joint i), y (4n,), bound a scalar or (4n,) [N m], qd (n, 4)
+    joint speeds [rad/s], taps the parallel filter's (``settings.taps()``). The low-speed exclusion
+    (``exclude_low_speed``); unless ``settings.decimation == 1`` with one tap, the parallel filter and decimation
+    (``parallel_filter``, with ``theta_abs_max`` to fold W's rounding into the bound) and the exclusion propagated over
+    each output's window (``propagate_mask``). Returns ``(fe, rows, keep)``: the filter's result (None unfiltered),
+    the kept rows (indices into ``fe.W`` or ``w``) and the raw rows' mask (4n,).
+    """
+    keep = exclude_low_speed(qd, settings.speed_threshold)
+    if settings.decimation == 1 and np.size(taps) == 1:
+        return None, np.flatnonzero(keep), keep
+    fe = parallel_filter(w, y, bound, settings.decimation, taps=taps, theta_abs_max=theta_abs_max)
+    return fe, np.flatnonzero(fe.propagate_mask(keep)), keep
+
+
 def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None = None, prior=None,
                    structure: str = "paper", block_samples: int = BLOCK_SAMPLES) -> Equation:
     """The processed equation of a :class:`sim.Dataset` (t, q, tau) under a raw-row bound [N m].
@@ -180,20 +197,17 @@ def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None
         qd = est.qd[sl]
         w = regressor(geometry, est.q[sl], qd, est.qdd[sl], structure=structure)
         y = np.asarray(tau[a:b], dtype=float).reshape(-1)
-        keep = exclude_low_speed(qd, settings.speed_threshold)
+        rb = _bounds_of(b_raw, a, b)
+        fe, rows, keep = select_rows(w, y, float(rb[0]) if scalar else rb, qd, settings, taps, t_abs)
         own = (trim + k1 * factor if k1 < m else b) - a  # samples not shared with the next block
         kept_raw += int(keep[:N_JOINTS * own].sum())
-        rb = _bounds_of(b_raw, a, b)
-        if not filtered:
-            rows = np.flatnonzero(keep)
+        if fe is None:
             W_all[r:r + rows.size] = w[rows]
             r += rows.size
             ys.append(y[rows]); bs.append(rb[rows])
             ss.append(a + rows // N_JOINTS); js.append(rows % N_JOINTS)
             continue
-        fe = parallel_filter(w, y, float(rb[0]) if scalar else rb, factor, taps=taps, theta_abs_max=t_abs)
         del w
-        rows = np.flatnonzero(fe.propagate_mask(keep))
         W_all[r:r + rows.size] = fe.W[rows]
         r += rows.size
         ys.append(fe.y[rows]); bs.append(fe.bound[rows])

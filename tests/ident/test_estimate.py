@@ -177,8 +177,8 @@ INF_Y[3] = np.inf
         ({"W": NAN_W}, ValueError, r"W must be finite, got 1 NaN and 0 inf entries \(first at index \(4, 1\)\)"),
         ({"y": INF_Y}, ValueError, r"y must be finite, got 0 NaN and 1 inf"),
         ({"y": GOOD_Y[:-1]}, ValueError, r"y must have shape \(m,\) = \(20,\) to match W, got \(19,\)"),
-        ({"W": GOOD_W[:2]}, ValueError, r"W must have shape \(m, p\) with m >= p >= 1, got \(2, 3\)"),
-        ({"W": GOOD_W[:, 0]}, ValueError, r"W must have shape \(m, p\) with m >= p >= 1, got \(20,\)"),
+        ({"W": GOOD_W[:0]}, ValueError, r"W must have shape \(m, p\) with m >= 1 and p >= 1, got \(0, 3\)"),
+        ({"W": GOOD_W[:, 0]}, ValueError, r"W must have shape \(m, p\) with m >= 1 and p >= 1, got \(20,\)"),
         ({"W": np.full((20, 3), "a")}, TypeError, r"W must be a real numeric array, got dtype <U1"),
         ({"bound": 0.0}, ValueError, r"bound must be finite and > 0 .* got 0.0"),
         ({"bound": -1.0}, ValueError, r"bound must be finite and > 0"),
@@ -212,3 +212,31 @@ def test_integer_and_fortran_ordered_input_is_accepted():
     y = (W @ np.ones(3)).astype(np.int64)
     box = ident.estimate(W, y, 1, (np.zeros(3), 2 * np.ones(3)))
     assert box.contains(np.ones(3)).all()
+
+
+@pytest.mark.parametrize("method", ["hull", "cgsp", "contractor", "zonotope", "ellipsoid", "parallelotope"])
+def test_fewer_rows_than_parameters_give_an_outer_box(method):
+    """N < p is a bounded polytope (the prior bounds it): every guaranteed built-in returns a box containing the
+    exact hull (scipy linprog), the hull equal to it within the LP tolerance."""
+    from tests.ident.estimators.oracles import box_contains, exact_hull
+
+    rng = np.random.default_rng(7)
+    W = rng.standard_normal((2, 5))
+    theta = rng.uniform(-1, 1, 5)
+    y = W @ theta + rng.uniform(-0.1, 0.1, 2)
+    prior = Box(theta - 1.0, theta + 1.0)
+    lo, hi = exact_hull(W, y, np.full(2, 0.1), prior)
+    box = ident.estimate(W, y, 0.1, (prior.lower, prior.upper), method=method)
+    assert box_contains(box, lo, hi)
+    if method == "hull":
+        np.testing.assert_allclose(box.lower, lo, atol=1e-7)
+        np.testing.assert_allclose(box.upper, hi, atol=1e-7)
+
+
+def test_the_builtin_dispatch_runs_only_its_own_methods():
+    """estimate.METHODS names what _builtin_estimate runs; another registry name is refused, not run as cgsp."""
+    from h4bench.ident.estimators import estimate as est
+
+    assert est.METHODS == ("hull", "cgsp")
+    with pytest.raises(ValueError, match="method must be one of \\('hull', 'cgsp'\\), got 'ellipsoid'"):
+        est._builtin_estimate(GOOD_W, GOOD_Y, 1.0, GOOD_PRIOR, "ellipsoid")

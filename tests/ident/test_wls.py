@@ -98,7 +98,7 @@ def test_ill_conditioned_parameters_are_flagged_not_nan():
         (np.ones((8, 2)), np.ones(8), 0, ValueError, "multiple of joints=0"),
         (np.ones((8, 2)), np.ones(8), 2.0, TypeError, "joints must be an int"),
         (np.ones((8, 2)), np.ones(7), 4, ValueError, r"y must have shape \(m,\) = \(8,\)"),
-        (np.ones((3, 14)), np.ones(3), 1, ValueError, r"W must have shape \(m, p\) with m >= p >= 1, got \(3, 14\)"),
+        (np.ones((3, 14)), np.ones(3), 1, ValueError, r"W must have shape \(m, p\) with m > p for a variance estimate, got \(3, 14\)"),
         (np.full((8, 2), np.nan), np.ones(8), 4, ValueError, "W must be finite, got 16 NaN"),
     ],
 )

@@ -83,8 +83,8 @@ def test_toppra_is_no_slower_than_an_independently_timed_scaling(geometry, pick_
 
 
 def test_friction_slices_follow_the_parameter_names():
-    assert [ident.PARAMETER_NAMES[i] for i in range(14)[_FV]] == ["Fv1", "Fv2", "Fv3", "Fv4"]
-    assert [ident.PARAMETER_NAMES[i] for i in range(14)[_FS]] == ["Fs1", "Fs2", "Fs3", "Fs4"]
+    assert [ident.PARAMETER_NAMES[i] for i in _FV] == ["Fv1", "Fv2", "Fv3", "Fv4"]
+    assert [ident.PARAMETER_NAMES[i] for i in _FS] == ["Fs1", "Fs2", "Fs3", "Fs4"]
 
 
 def test_vectorised_torque_constraint_equals_toppras_own(geometry):

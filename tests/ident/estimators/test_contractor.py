@@ -140,7 +140,12 @@ def test_attributes_and_bad_input():
     assert "Jaulin" in contractor.citation and contractor.description
     with pytest.raises(ValueError, match="bound"):
         contractor(np.eye(2), np.zeros(2), np.array([1.0, -1.0]), Box([-1.0, -1.0], [1.0, 1.0]))
+    # the one validator of the protocol: a (lower, upper) pair is a prior like the Box (default names)
+    pair = contractor(np.eye(2), np.zeros(2), 1.0, ([-1.0, -1.0], [1.0, 1.0]))
+    boxed = contractor(np.eye(2), np.zeros(2), 1.0, Box([-1.0, -1.0], [1.0, 1.0]))
+    np.testing.assert_array_equal(pair.lower, boxed.lower)
+    np.testing.assert_array_equal(pair.upper, boxed.upper)
     with pytest.raises(TypeError, match="prior"):
-        contractor(np.eye(2), np.zeros(2), 1.0, ([-1.0, -1.0], [1.0, 1.0]))
+        contractor(np.eye(2), np.zeros(2), 1.0, "[-1, 1]")
     with pytest.raises(ValueError, match="y"):
         contractor(np.eye(2), np.zeros(3), 1.0, Box([-1.0, -1.0], [1.0, 1.0]))

@@ -42,10 +42,41 @@ def test_through_the_registry(spec):
         assert oracles.encloses_exact_hull(box, W, y, b, prior)
 
 
-def test_registered_claims_match_the_modules():
-    """The built-in registry entries (written without importing the modules) claim what the functions say."""
-    for spec in SPECS:
-        by_name = [e for e in registry.BUILTINS.values() if e.func == spec]
-        assert len(by_name) == 1, f"{spec} is not registered once"
-        est, func = by_name[0], registry.get(spec).resolve()
-        assert (est.kind, est.rigorous, est.level) == (func.kind, func.rigorous, getattr(func, "level", None))
+@pytest.mark.parametrize("name", sorted(registry.BUILTINS))
+def test_the_claims_are_the_same_on_every_path(name):
+    """A built-in by name, as ``module:attribute`` and as the callable: one set of claims (read from the function)."""
+    by_name = registry.get(name)
+    func = by_name.resolve()
+    spec = f"{func.__module__}:{func.__name__}"
+    fields = registry.CLAIMS
+    for other in (registry.get(spec), registry.get(func)):
+        assert [getattr(other, f) for f in fields] == [getattr(by_name, f) for f in fields], other.origin
+    assert by_name.origin == "built-in" and by_name.description and by_name.citation
+
+
+def test_context_reaches_only_the_estimators_that_take_it():
+    """check_consistency (a built-in's keyword) never reaches a plugin taking ``**context``; groups does."""
+    from h4bench import ident
+
+    seen = {}
+
+    def plugin(W, y, bound, prior, **context):
+        seen.update(context)
+        return prior
+
+    rng = np.random.default_rng(3)
+    W, y, b, prior, theta = oracles.problem(rng, 3, 40)
+    ident.estimate(W, y, b, prior, method=plugin, groups=np.arange(40) % 4, check_consistency=False)
+    assert set(seen) == {"groups"}
+    assert registry.takes(plugin, "instruments") and not registry.takes(plugin, "check_consistency")
+    assert registry.takes("iv", "instruments") and not registry.takes("hull", "instruments")
+    assert not registry.takes("no-such-estimator", "instruments")
+    assert registry.get("hull").context == ("check_consistency",)
+    assert registry.get("iv").context == ("instruments",) and registry.get("wls").context == ("groups",)
+
+
+def test_a_declared_context_the_signature_does_not_take_is_refused():
+    with pytest.raises(registry.EstimatorError, match="declares the context \\['groups'\\]"):
+        @registry.declare(context=("groups",))
+        def f(W, y, bound, prior):
+            return prior

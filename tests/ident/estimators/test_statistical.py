@@ -157,3 +157,19 @@ def test_prior_intersection_and_attributes():
         ols(W, y, 1.0, _prior(2), level=1.5)
     with pytest.raises(ValueError, match="groups"):
         wls(W, y, 1.0, _prior(2), groups=np.zeros(3, dtype=int))
+
+
+def test_the_registered_wls_is_ident_wls():
+    """One WLS: the registered estimator's centre and standard deviations are ident.wls's (groups as joints)."""
+    from h4bench import ident
+
+    rng = np.random.default_rng(5)
+    W = rng.standard_normal((120, 3)) * np.array([1.0, 1e3, 1e-3])
+    groups = np.arange(120) % 3 + 7  # labels need not start at 0
+    y = W @ np.array([1.0, 2e-3, 5e2]) + rng.standard_normal(120) * (groups - 6)
+    box = wls(W, y, 1.0, Box(np.full(3, -1e6), np.full(3, 1e6)), groups=groups)
+    ref = ident.wls(W, y, 3, joint_of_row=groups - 7)
+    t = stats.t.ppf(1 - 0.05 / 6, ref.dof)
+    np.testing.assert_allclose(box.info["theta"], ref.theta, rtol=1e-14)
+    np.testing.assert_allclose(box.upper - box.lower, 2 * t * ref.std, rtol=1e-12)
+    np.testing.assert_allclose(np.sqrt(np.diag(ref.cov)), ref.std, rtol=1e-12)
