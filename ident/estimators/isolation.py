@@ -347,13 +347,18 @@ def call(method, W, y, bound, prior, timeout: float | None = None, **context) ->
     before = _checksums(inputs)
     target = est if est.origin == "built-in" else method
 
+    def changed() -> list[str]:
+        return [k for k, v in _checksums(inputs).items() if v != before[k]]
+
     def work():
-        box = registry.call(target, inputs["W"], inputs["y"], inputs["bound"], prior,
-                            **{k: v for k, v in inputs.items() if k not in ("W", "y", "bound")})
-        changed = [k for k, v in _checksums(inputs).items() if v != before[k]]
-        if changed:
-            return ("changed", changed)
-        return ("box", box)
+        try:
+            box = registry.call(target, inputs["W"], inputs["y"], inputs["bound"], prior,
+                                **{k: v for k, v in inputs.items() if k not in ("W", "y", "bound")})
+        except BaseException:  # a changed input outweighs what the method then raised (e.g. "inconsistent")
+            if changed():
+                return ("changed", changed())
+            raise
+        return ("changed", changed()) if changed() else ("box", box)
 
     kind, payload = _forked(work, timeout, f"estimator {name!r} ({est.origin})")
     if kind == "box":
