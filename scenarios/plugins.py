@@ -53,23 +53,46 @@ def _plugin_source(method: str) -> Path:
 
 
 def _zip_package(folder: Path, into: Path) -> Path:
-    """``folder``'s .py files (the top-level package, a namespace package too) as ``<into>/<name>.zip``."""
+    """``folder``'s .py files (the top-level package, a namespace package too: each of its folders gets an empty
+    ``__init__.py`` in the zip) as ``<into>/<name>.zip``."""
     import zipfile
 
-    target = into / f"{folder.name}.zip"
+    import hashlib
+
+    h = hashlib.sha256()
+    for f in sorted(folder.rglob("*.py")):
+        h.update(str(f.relative_to(folder)).encode())
+        h.update(f.read_bytes())
+    # named by its content: a worker caches a zip's listing by path (zipimport), so a new version needs a new name
+    target = into / f"{folder.name}-{h.hexdigest()[:12]}.zip"
     with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
         for f in sorted(folder.rglob("*.py")):
             if "__pycache__" not in f.parts:
                 z.write(f, str(f.relative_to(folder.parent)))
+        for d in sorted({folder, *(f.parent for f in folder.rglob("*.py"))}):
+            if not (d / "__init__.py").is_file() and "__pycache__" not in d.parts:
+                # zipimport finds no namespace package: an empty __init__ makes the folder a package in the zip
+                z.writestr(str((d / "__init__.py").relative_to(folder.parent)), "")
     return target
 
 
-def worker_lacks(methods) -> dict:
-    """On a worker (``Client.run``): the plugin methods it cannot resolve, ``{method: reason}`` (each resolved in a
-    child process: the worker never runs a plugin's import code itself)."""
+def worker_lacks(methods, shipped=(), dask_worker=None) -> dict:
+    """On a worker (``Client.run``): put the shipped files (names in the worker's ``local_directory``: a zip on
+    ``sys.path`` itself, a module's folder for a .py) on ``sys.path``, then return the plugin methods it cannot
+    resolve, ``{method: reason}`` (each resolved in a child process: the worker never runs a plugin's import code
+    itself)."""
+    import os
+    import sys
+
     from h4bench.ident.errors import EstimatorError
     from h4bench.ident.estimators import isolation, registry
 
+    if dask_worker is not None:
+        for name in shipped:
+            path = os.path.join(dask_worker.local_directory, name)
+            entry = path if name.endswith(".zip") else dask_worker.local_directory
+            if os.path.exists(path) and entry not in sys.path:
+                sys.path.insert(0, entry)
     out = {}
     for m in methods:
         if m in registry.BUILTINS:
@@ -91,6 +114,7 @@ def ship_plugins(client, methods) -> None:
     import tempfile
 
     plugins = [m for m in methods if isinstance(m, str) and ":" in m]
+    names = set()
     with tempfile.TemporaryDirectory(prefix="h4bench-plugins-") as tmp:
         shipped = set()
         for m in plugins:
@@ -99,12 +123,14 @@ def ship_plugins(client, methods) -> None:
                 continue
             shipped.add(src)
             path = src if src.is_file() else _zip_package(src, Path(tmp))
+            names.add(path.name)
             try:
                 client.upload_file(str(path), load=False)
             except Exception as exc:  # noqa: BLE001 - a scheduler or worker that refuses the file
                 raise ScenarioError(f"cannot send the plugin {m!r} ({path.name}) to the Dask workers: "
                                     f"{type(exc).__name__}: {exc}") from exc
-    lacking = {w: r for w, r in client.run(worker_lacks, [m for m in methods if isinstance(m, str)]).items() if r}
+    lacking = {w: r for w, r in client.run(worker_lacks, [m for m in methods if isinstance(m, str)],
+                                           sorted(names)).items() if r}
     if lacking:
         worker, missing = next(iter(lacking.items()))
         raise ScenarioError(
