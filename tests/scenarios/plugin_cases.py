@@ -58,7 +58,8 @@ class Thing:
 
 def weird_info(W, y, bound, prior):
     box = _hull(W, y, bound, prior)
-    return ident.Box(box.lower, box.upper, box.names, {"obj": Thing(), "fn": lambda: 1, "ok": [1, 2]})
+    return ident.Box(box.lower, box.upper, box.names, {"obj": Thing(), "fn": lambda: 1, "ok": [1, 2],
+                                                       "objs": [Thing()]})
 
 
 def raiser(W, y, bound, prior):

@@ -109,6 +109,7 @@ def test_an_object_in_box_info_is_written_as_its_repr(with_plugins, here):
     info = result["methods"]["trustcases:weird_info"]["info"]
     assert result["methods"]["trustcases:weird_info"]["status"] == "ok"
     assert "Thing object" in info["obj_repr"] and "lambda" in info["fn_repr"] and info["ok"] == [1, 2]
+    assert "Thing object" in info["objs_repr"]  # a list holding an object: before, "not JSON serialisable"
 
 
 def test_a_failed_only_method_exits_4_and_claims_no_verdict(here):
