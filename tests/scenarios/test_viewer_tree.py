@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from h4bench.scenarios import replay
+from tests.scenarios.test_trust import _alive
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process checks via ps and /proc")
 
@@ -57,12 +58,7 @@ def _descendants(pid: int) -> list[int]:
 
 
 def _gone(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    status = Path(f"/proc/{pid}/status")
-    return status.exists() and "\nState:\tZ" in status.read_text()
+    return not _alive(pid)
 
 
 def _wait_gone(pids, seconds=15.0) -> list[int]:
