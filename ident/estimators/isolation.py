@@ -168,7 +168,7 @@ def _picklable(value) -> bytes:
 def _in_child(work, w: int) -> None:  # pragma: no cover - runs in the forked child (measured through the parent)
     try:
         _die_with_parent()
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's: it stops the child (SIGKILL)
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         sys.stdout.flush()
         os.dup2(2, 1)  # the plugin's output goes to stderr: stdout stays the command's
