@@ -33,6 +33,7 @@ import numpy as np
 
 import h4bench
 from h4bench import sim
+from h4bench.scenarios import plugins
 from h4bench.scenarios.rundir import prepare_folder, write_json
 from h4bench.scenarios.spec import ScenarioError
 
@@ -103,11 +104,23 @@ def provenance(spec: dict, seed: int) -> dict:
         "model_hash": model_hash(spec["model"] or None),
         "version": version,
         "code_hash": code_hash(),
+        "methods_code": plugins.methods_code(spec.get("estimators", {}).get("methods", [])),
     }
 
 
 def _differences(saved: dict, now: dict) -> list[str]:
-    return [f"{k} (saved {saved.get(k)!r}, now {now.get(k)!r})" for k in now if saved.get(k) != now.get(k)]
+    out = []
+    for k in now:
+        if saved.get(k) == now.get(k):
+            continue
+        if k == "methods_code":
+            old, new = saved.get(k) or {}, now[k]
+            changed = sorted(m for m in new if old.get(m) != new[m])
+            out.append(f"the methods' code changed ({', '.join(changed) or 'methods_code'}: saved "
+                       f"{[old.get(m) for m in changed]!r}, now {[new[m] for m in changed]!r})")
+        else:
+            out.append(f"{k} (saved {saved.get(k)!r}, now {now.get(k)!r})")
+    return out
 
 
 # ------------------------------------------------------------------------------------------------ workers
@@ -273,6 +286,8 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
         futures = {}
         interrupted = False
         try:
+            if client is not None:
+                plugins.ship_plugins(client, spec.get("estimators", {}).get("methods", []))
             with _TermAsInterrupt():
                 futures = {executor.submit(job, spec, i, seed): i for i in todo}
                 for fut in concurrent.futures.as_completed(futures):
@@ -304,10 +319,11 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     seconds = time.perf_counter() - started
     if errors:
         first = min(errors)
+        died = plugins.worker_death_note(spec, errors)
         raise CampaignRunError(
             f"{len(errors)} of {n} runs crashed (not saved; the {len(runs)} others are saved in {str(out)!r} and a "
-            f"restart reuses them): run {first} (seed {seed + first}): {errors[first]}. Re-run it alone with --only "
-            f"{first} to inspect it", errors)
+            f"restart reuses them): run {first} (seed {seed + first}): {errors[first]}{died}. Re-run it alone with "
+            f"--only {first} to inspect it", errors)
     computed = len(todo)
     info = {"reused": reused, "computed": computed, "seconds": seconds,
             "runs_per_minute": 60.0 * computed / seconds if computed and seconds > 0 else None,

@@ -103,14 +103,17 @@ def _summary_tables(result: dict, width: int) -> list:
     from rich.console import Console
     from rich.table import Table
 
-    names = result["parameters"]
+    from rich.markup import escape
+
+    names = [escape(str(n)) for n in result["parameters"]]
     true = result.get("true")
     groups = []  # each: list of (header, cells)
     if true is not None:
         groups.append([("true", [_num(v) for v in true])])
     methods = {k: v for k, v in result.get("methods", {}).items() if v.get("status") == "ok" and v.get("lower")}
     for name, m in methods.items():
-        cols = [(f"{name} lower", [_num(v) for v in m["lower"]]), (f"{name} upper", [_num(v) for v in m["upper"]])]
+        cols = [(f"{escape(name)} lower", [_num(v) for v in m["lower"]]),
+                (f"{escape(name)} upper", [_num(v) for v in m["upper"]])]
         enc = m.get("enclosed")
         if enc:
             cols.append(("in", ["yes" if e else "[red]NO[/red]" for e in enc]))
@@ -120,7 +123,7 @@ def _summary_tables(result: dict, width: int) -> list:
                        ("%sigma", [f"{v:.3g}" for v in result["wls"]["rel_std_percent"]])])
 
     seed = result.get("seed")
-    title = result["scenario"] + (f" (seed {seed})" if seed is not None else "")
+    title = escape(str(result["scenario"])) + (f" (seed {seed})" if seed is not None else "")
     probe = Console(width=10_000, file=open(__import__("os").devnull, "w"))
 
     def make(gs, first):
@@ -222,17 +225,26 @@ def run(
                                           "every registered one; h4bench estimators lists them), replacing the "
                                           "spec's [estimators] methods"),
     runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
+    method_timeout: Optional[float] = typer.Option(None, help="seconds each estimator may run per run (default: no "
+                                                   "limit); a method over it is failed: timeout"),
 ) -> None:
-    """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
+    """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd).
+
+    Exit codes: 0 done (every method gave a box or proved the data inconsistent, in every run); 2 bad option,
+    scenario or method (nothing computed) or a failed run; 4 some method failed (in some run; the results are
+    still written, the failures in the methods' entries); 130 interrupted.
+    """
     from h4bench.scenarios.campaign import CampaignInterrupted
+    from h4bench.scenarios.identify import EXIT_METHOD_FAILED
     from h4bench.scenarios.runner import run_scenario
 
     _importable_from_cwd(methods)
     try:
+        _check_timeout(method_timeout)
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
                                   scheduler=scheduler, workers=workers, only=only, fresh=fresh,
-                                  methods=methods, runs=runs)
+                                  methods=methods, runs=runs, method_timeout=method_timeout)
     except CampaignInterrupted as exc:
         typer.secho(f"stopped: {exc}", fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130)
@@ -247,6 +259,7 @@ def run(
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
+    _exit_if_failed(result, EXIT_METHOD_FAILED)
 
 
 def _importable_from_cwd(methods: str | None) -> None:
@@ -346,29 +359,36 @@ def identify(
     as_json: bool = typer.Option(False, "--json", help="print result.json (the only output on stdout)"),
     pairs: Optional[str] = typer.Option(None, help="the feasible set's projections onto pairs, feasible_set.png: "
                                         "auto (the most coupled) or NAME:NAME,... (e.g. Fv1:Fs1,Imot1:Mnac)"),
+    method_timeout: Optional[float] = typer.Option(None, help="seconds each method may run (default: no limit); "
+                                                   "a method over it is failed: timeout"),
 ) -> None:
     """The estimators on a user's own data; prints the table (or result.json) and writes result.json.
 
     Exit codes:
-    0 done;
-    2 bad option, file or data (one error line on stderr);
-    3 the data are proven inconsistent with the bound (result.json still written, with the smallest consistent bound).
+    0 done: every requested method gave a box or proved the data inconsistent;
+    2 bad option, file or data, or a method that cannot be resolved (one error line on stderr, nothing computed);
+    3 the data are proven inconsistent with the bound (result.json still written, with the smallest consistent
+    bound in --bound's units and the processed rows' one);
+    4 some requested method failed (raised, exited, timed out, changed its inputs, returned no box; result.json
+    still written, the failure in its entry).
     """
-    from h4bench.scenarios.identify import EXIT_INCONSISTENT, METHODS, OptionError, check_method
+    from h4bench.scenarios.identify import EXIT_INCONSISTENT, EXIT_METHOD_FAILED, METHODS, OptionError
+    from h4bench.scenarios.judging import parse_methods
 
     _importable_from_cwd(method)
     try:
+        _check_timeout(method_timeout)
         try:
-            check_method(method)
-        except ValueError:
-            raise OptionError(f"--method must be one of {' | '.join(METHODS)} (or an estimator plugin), "
-                              f"got {method!r}") from None
+            parse_methods(method)
+        except ValueError as exc:
+            raise OptionError(f"--method must name estimators ({' | '.join(METHODS)}, several comma-separated, all, "
+                              f"or an estimator plugin), got {method!r}: {exc}") from None
         if urdf is not None:
             if torque_timing != "hold":
                 raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
                                   f"regressor at the sample instants), got --torque-timing {torque_timing}")
             result = _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist,
-                                    cutoff_hz, decimation, prior, model, out, pairs)
+                                    cutoff_hz, decimation, prior, model, out, pairs, method_timeout)
         else:
             for name, value in (("--mass", mass), ("--reach", reach), ("--cutoff-hz", cutoff_hz != "100" or None),
                                 ("--decimation", decimation != "100" or None), ("--no-friction", not friction or None),
@@ -377,7 +397,7 @@ def identify(
                 if value is not None:
                     raise OptionError(f"{name} needs --urdf (the H4's settings are its spec's), got {name}")
             result = _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing,
-                                  pairs)
+                                  pairs, method_timeout)
     except (ValueError, OSError) as exc:  # OptionError, DatasetError, ProcessingError, ModelError, ...
         _fail(str(exc))
     if as_json:
@@ -393,21 +413,65 @@ def identify(
             for n, e in zip(result["parameters"], result["parameter_expressions"]):
                 typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
     if result.get("kind") == "identify" and not as_json:
-        unsound = result.get("unsound") or []
-        typer.echo("narrower-than-hull check: " + (f"UNSOUND {', '.join(unsound)}" if unsound else
-                   "no guaranteed box is narrower than the exact hull" if result.get("hull_reference") else
-                   "not run (no hull box)"))
+        typer.echo("narrower-than-hull check: " + _verdict(result))
     if result.get("consistent") is False:
-        failed = [m for m in result["methods"].values() if m.get("min_bound") is not None]
-        smallest = (failed[0]["min_bound"] if failed else result.get("inconsistency", {}).get("min_bound")
-                    or result["wls"]["consistency"]["min_bound"])
-        typer.secho(f"error: the data are inconsistent with the bound (proven); the smallest consistent bound "
-                    f"is {smallest:.6g} N m", fg=typer.colors.RED, err=True)
+        typer.secho(f"error: the data are inconsistent with the bound (proven); {_smallest_bound(result)}",
+                    fg=typer.colors.RED, err=True)
         raise typer.Exit(EXIT_INCONSISTENT)
+    _exit_if_failed(result, EXIT_METHOD_FAILED)
+
+
+def _check_timeout(seconds) -> None:
+    if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
+        from h4bench.scenarios.identify import OptionError
+
+        raise OptionError(f"--method-timeout must be a number of seconds > 0, got {seconds!r}")
+
+
+def _verdict(result: dict) -> str:
+    """The narrower-than-hull line of ``identify``: it speaks only of boxes that exist."""
+    unsound = result.get("unsound") or []
+    if unsound:
+        return f"UNSOUND {', '.join(unsound)}"
+    if not result.get("hull_reference"):
+        return "not run (no hull box)"
+    checked = [n for n, m in result["methods"].items() if m.get("unsound") is False]
+    return "no guaranteed box is narrower than the exact hull" if checked else "no guaranteed box to check"
+
+
+def _smallest_bound(result: dict) -> str:
+    """The exit-3 message: the smallest consistent bound in --bound's units (raw rows; per joint when the bound
+    is per joint) and the processed rows' one beside it."""
+    sc = (result.get("inconsistency") or {}).get("smallest_consistent")
+    if sc is None:
+        failed = [m for m in result["methods"].values() if m.get("min_bound") is not None]
+        smallest = (failed[0]["min_bound"] if failed else (result.get("inconsistency") or {}).get("min_bound")
+                    or result["wls"]["consistency"]["min_bound"])
+        return f"the smallest consistent bound of the processed rows is {smallest:.6g} N m"
+    processed = f"the processed rows' smallest consistent bound is {sc['processed']:.6g} N m (filter gain {sc['gain']:.4g})"
+    if isinstance(result.get("bound"), list):
+        per = ",".join(f"{v:.6g}" for v in sc["raw"])
+        return (f"consistent bounds in --bound's units (raw rows, per joint: the given ones scaled up together) are "
+                f"--bound {per} N m; {processed}")
+    return f"the smallest consistent bound in --bound's units (raw rows) is {sc['raw_max']:.6g} N m; {processed}"
+
+
+def _failed_methods(result: dict) -> list[str]:
+    """Requested methods without a box or a proof of emptiness (in a campaign: in some run)."""
+    return [n for n, m in (result.get("methods") or {}).items()
+            if isinstance(m, dict) and (m.get("status") == "failed" or m.get("failure_messages"))]
+
+
+def _exit_if_failed(result: dict, code: int) -> None:
+    failed = _failed_methods(result)
+    if failed:
+        typer.secho(f"error: method(s) without a box: {', '.join(failed)} (see their entries in result.json)",
+                    fg=typer.colors.RED, err=True)
+        raise typer.Exit(code)
 
 
 def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
-                   decimation, prior, model, out, pairs=None) -> dict:
+                   decimation, prior, model, out, pairs=None, timeout=None) -> dict:
     from h4bench.scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
 
     for name, value in (("--prior", prior), ("--model", model)):
@@ -445,11 +509,12 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         mass=None if mass is None else parse_number(mass, "--mass", positive=True),
         reach=None if reach is None else parse_number(reach, "--reach", positive=True),
         friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=wrist,
-        cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out, pairs=pairs)
+        cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out, pairs=pairs,
+        timeout=timeout)
 
 
 def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold",
-                 pairs=None) -> dict:
+                 pairs=None, timeout=None) -> dict:
     from h4bench.scenarios.identify import OptionError, identify_csv, load_prior, parse_bound, parse_number
 
     bounds = parse_bound(bound)
@@ -460,7 +525,7 @@ def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, ou
     if torque_timing not in ("hold", "sample"):
         raise OptionError(f"--torque-timing must be hold or sample, got {torque_timing!r}")
     return identify_csv(file, bounds, method=method, prior=box, model=model, out=out, torque_timing=torque_timing,
-                        pairs=pairs)
+                        pairs=pairs, timeout=timeout)
 
 
 @app.command()

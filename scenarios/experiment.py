@@ -250,7 +250,8 @@ def judge_methods(run: ExperimentRun, methods) -> None:
     # the instruments cost one more processing pass: built only for a method that may use them
     needs = any(registry.takes(m, "instruments") for m in methods)
     context = estimator_context(run) if needs else {"groups": np.asarray(run.equation.joint, dtype=np.int64)}
-    outcomes, hull = judging.run_methods(list(methods), eq.W, eq.y, eq.bound, prior, context)
+    outcomes, hull = judging.run_methods(list(methods), eq.W, eq.y, eq.bound, prior, context,
+                                         timeout=run.spec["estimators"].get("method_timeout"))
     run.outcomes = outcomes
     for name, o in outcomes.items():
         run.seconds[name] = o.seconds

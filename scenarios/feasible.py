@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from h4bench.ident.errors import EstimatorError, InconsistentDataError
-from h4bench.ident.estimators import registry
+from h4bench.ident.estimators import isolation, registry
 from h4bench.ident.estimators.projection import ellipse_points, projections, zonogon
 
 __all__ = ["EXTRA_METHODS", "drawn_methods", "feasible_set", "identify_projections", "pairs_option", "parse_pairs",
@@ -85,9 +85,8 @@ def reference_sets(W, y, bound, prior, methods, *, boxes: dict | None = None, gr
             continue
         t0 = time.perf_counter()
         try:
-            est = registry.get(m)
             ctx = {"groups": groups} if groups is not None else {}
-            out[name] = registry.call(est, W, y, bound, prior, **ctx)
+            out[name] = isolation.call(m, W, y, bound, prior, **ctx)  # a plugin runs in a child process
         except (EstimatorError, InconsistentDataError, ValueError, TypeError, ArithmeticError) as exc:
             skipped[name] = f"{type(exc).__name__}: {exc}"
         seconds[name] = time.perf_counter() - t0

@@ -37,6 +37,7 @@ from h4bench.scenarios.spec import DEFAULTS
 METHODS = tuple(dict.fromkeys((*registry.BUILTINS, "wls")))  # the built-in box estimators (any the registry resolves works) and WLS
 N_JOINTS = 4
 EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (InconsistentDataError)
+EXIT_METHOD_FAILED = 4  # some requested method gave no box and no proof of emptiness (result.json still written)
 
 
 def check_method(method) -> str:
@@ -213,15 +214,16 @@ def _check_processed_bound(rows_bound, bound) -> None:
 
 
 def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None, out=None,
-                 block_samples: int = BLOCK_SAMPLES, torque_timing: str = "hold", pairs: str | None = None) -> dict:
+                 block_samples: int = BLOCK_SAMPLES, torque_timing: str = "hold", pairs: str | None = None,
+                 timeout: float | None = None) -> dict:
     """Identify the 14 parameters from a CSV log and write ``result.json`` in ``out``.
 
     bound : raw-row bound [N m], one number or (4,) per joint; prior : (lower, upper) numbers, (14,) arrays
     each, or a Box; block_samples : processing block length (:func:`ident.processing.processing.build_equation`);
     torque_timing : "hold" (each logged torque is a command held over its step: the regressor at mid-step) or
     "sample" (a torque measured at the sample instant), :func:`ident.processing.filtering.derivatives`;
-    pairs : ``--pairs`` (``auto`` or ``NAME:NAME,...``): the feasible set's projections, ``feasible_set.png``.
-    Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
+    pairs : ``--pairs`` (``auto`` or ``NAME:NAME,...``): the feasible set's projections, ``feasible_set.png``;
+    timeout : ``--method-timeout``, seconds per method (None: no limit). Returns the result dict. Data proven inconsistent with the bound give ``result["consistent"] = False``
     (the method's status ``inconsistent`` with ``min_bound``, the smallest consistent scalar bound), not an exception.
     """
     check_method(method)
@@ -249,7 +251,7 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     }
     result["min_consistent_bound"] = float(ident.min_consistent_bound(eq.W, eq.y, box_prior))
     return _estimate_and_write(result, eq.W, eq.y, eq.bound, box_prior, method, N_JOINTS, eq.names, eq.joint, out,
-                               pairs)
+                               pairs, raw_bound=b, gain=float(eq.info["l1_norm"]), timeout=timeout)
 
 
 # ------------------------------------------------------------------------------- any serial robot (URDF)
@@ -307,7 +309,8 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
                       offset: bool = True, coupled_wrist: tuple[int, int] | None = None,
                       rotor_inertia_max: float | None = None,
                       cutoff_hz: float = URDF_PROCESSING["cutoff_hz"],
-                      decimation: int = URDF_PROCESSING["decimation"], out=None, pairs: str | None = None) -> dict:
+                      decimation: int = URDF_PROCESSING["decimation"], out=None, pairs: str | None = None,
+                      timeout: float | None = None) -> dict:
     """Identify a serial robot's base parameters from a joint-side CSV log; write ``result.json`` in ``out``.
 
     urdf : the robot (:class:`ident.robots.serial.SerialRobot`, n actuated joints; friction, rotor_inertia, offset
@@ -390,7 +393,8 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
                             "singular_gap": base.singular_gap},
         "methods": {},
     }
-    return _estimate_and_write(result, eq.W, eq.y, rows_bound, prior, method, nj, base.names, eq.joint, out, pairs)
+    return _estimate_and_write(result, eq.W, eq.y, rows_bound, prior, method, nj, base.names, eq.joint, out, pairs,
+                               raw_bound=b, gain=float(eq.gain), timeout=timeout)
 
 
 # the Chebyshev LP's upper bound exceeds the smallest consistent scale by at most its tolerance (about 1e-9
@@ -429,8 +433,30 @@ def _pairs(pairs, names):
         raise OptionError(str(exc)) from None
 
 
+def consistent_raw_bound(W, y, bound, prior, joint_of_row, raw_bound, gain: float) -> dict:
+    """The smallest consistent bound in ``--bound``'s units (raw rows), from the processed rows.
+
+    The processed rows' bounds are ``bound_k = gain * b_j + r_k`` (b_j the raw bound of row k's joint j, gain the
+    filter's ``||h||_1``, r_k >= 0 the folded rounding terms, which do not decrease with b). ``scale`` is an upper
+    bound of the smallest factor s that makes ``s * bound`` consistent (:func:`wls_consistency`, the Chebyshev LP
+    on the rows scaled by their bound). Raw bounds ``b'_j = b_j + (s - 1) max_{k in j} bound_k / gain`` give
+    processed bounds ``>= s * bound_k`` row by row, so they are consistent: ``raw`` (n joints,) [N m] is that
+    choice (the given per-joint bounds scaled up together; other per-joint trade-offs may exist), ``raw_max`` the
+    one number that covers every joint, ``processed`` the smallest consistent scalar bound of the processed rows
+    [N m] (not in --bound's units)."""
+    b = np.broadcast_to(np.asarray(bound, dtype=float), (len(y),))
+    joint_of_row = np.asarray(joint_of_row)
+    raw = np.asarray(raw_bound, dtype=float)
+    s = max(1.0, wls_consistency(W, y, b, prior)["scale"])
+    need = np.array([b[joint_of_row == j].max() if np.any(joint_of_row == j) else 0.0 for j in range(raw.size)])
+    raw_new = np.nextafter(raw + (s - 1.0) * need / gain, np.inf)
+    return {"scale": s, "raw": raw_new.tolist(), "raw_max": float(raw_new.max()),
+            "processed": float(ident.min_consistent_bound(W, y, prior)), "gain": gain}
+
+
 def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: int, names, joint_of_row, out,
-                        pairs: str | None = None) -> dict:
+                        pairs: str | None = None, raw_bound=None, gain: float | None = None,
+                        timeout: float | None = None) -> dict:
     """The methods (``method``: one or a comma-separated list, :func:`check_method`) on (W, y, bound), judged side
     by side with the exact hull as reference (:mod:`scenarios.judging`: no truth, so ``enclosed`` is null, but the
     narrower-than-hull check runs), into ``result``; ``wls`` also gives the %sigma table (``result["wls"]``). A
@@ -441,9 +467,9 @@ def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: i
 
     methods = judging.parse_methods(method)
     groups = np.asarray(joint_of_row, dtype=np.int64)
-    outcomes, hull = judging.run_methods(methods, W, y, bound, prior, {"groups": groups})
+    outcomes, hull = judging.run_methods(methods, W, y, bound, prior, {"groups": groups}, timeout=timeout)
     if hull is None:  # no method other than the hull: still the reference of the verdict
-        hull = outcomes.get("hull") or judging.run_method("hull", W, y, bound, prior)
+        hull = outcomes.get("hull") or judging.run_method("hull", W, y, bound, prior, timeout=timeout)
     ref = judging.hull_reference(W, y, bound, prior, hull.box) if hull.status == "ok" else None
     result["methods"] = judging.judge(outcomes, ref, None, list(names))
     result["hull_reference"] = None if ref is None else ref.describe()
@@ -457,6 +483,10 @@ def _estimate_and_write(result: dict, W, y, bound, prior, method: str, joints: i
         result["consistent"] = False
         result.setdefault("inconsistency", {"min_bound": getattr(hull.error, "min_bound", None),
                                             "scale_lower": getattr(hull.error, "scale_lower", None)})
+        if raw_bound is not None and gain:
+            result["inconsistency"]["smallest_consistent"] = consistent_raw_bound(W, y, bound, prior, joint_of_row,
+                                                                                  raw_bound, gain)
+    result["failed_methods"] = [n for n, o in outcomes.items() if o.status == "failed"]
     result["unsound"] = sorted(n for n, m in result["methods"].items() if m.get("unsound"))
     if "wls" in methods:
         w = ident.wls(W, y, joints=joints, names=names, joint_of_row=joint_of_row)

@@ -491,7 +491,8 @@ def viewer_command(path, web: bool = False, port: int | None = None, bind: str =
         ipaddress.ip_address(str(bind))
     except ValueError:
         raise ReplayError(f"--bind must be an IP address (127.0.0.1, 0.0.0.0, ::), got {bind!r}") from None
-    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
+    binary = viewer_binary()
+    exe = binary or shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
     cmd = [exe] if exe else [sys.executable, "-m", "rerun"]
     cmd += ["--bind", str(bind)]
     if web:
@@ -501,21 +502,62 @@ def viewer_command(path, web: bool = False, port: int | None = None, bind: str =
     return cmd + [str(path)]
 
 
+def viewer_binary() -> str | None:
+    """The Rerun viewer's own binary (what the ``rerun`` console script, a Python wrapper, starts as its child):
+    ``RERUN_CLI_PATH`` if set, else ``rerun_cli/rerun`` beside the installed package; None if not found. Started
+    directly, the viewer is this command's child, not a grandchild that outlives it."""
+    import importlib.util
+    import os
+
+    if os.environ.get("RERUN_CLI_PATH"):
+        return os.environ["RERUN_CLI_PATH"]
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is None or not spec.origin:
+        return None
+    exe = Path(spec.origin).parent / ("rerun.exe" if sys.platform.startswith("win") else "rerun")
+    return str(exe) if exe.is_file() and os.access(exe, os.X_OK) else None
+
+
+#: seconds the viewer's process group has to end after SIGTERM before SIGKILL (the binary was measured ignoring
+#: SIGTERM for over a second)
+STOP_GRACE_S = 2.0
+
+
 def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
-    """Linux: the viewer gets SIGTERM when ``h4bench replay`` dies, however it dies (``PR_SET_PDEATHSIG``)."""
+    """Linux: the viewer gets SIGKILL when ``h4bench replay`` dies, however it dies (``PR_SET_PDEATHSIG``)."""
     import ctypes
     import signal
 
     try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)
     except OSError:
         pass
 
 
+def _end_group(child) -> None:
+    """End the viewer's whole process group: SIGTERM, then SIGKILL after :data:`STOP_GRACE_S`."""
+    import os
+    import signal
+
+    for sig, wait in ((signal.SIGTERM, STOP_GRACE_S), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(child.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            break
+        try:
+            child.wait(wait)
+        except subprocess.TimeoutExpired:
+            continue
+        try:  # the leader is gone; a member of its group may remain
+            os.killpg(child.pid, 0)
+        except ProcessLookupError:
+            break
+
+
 def run_child(cmd: list[str]) -> int:
-    """Run ``cmd`` and wait; SIGTERM or Ctrl-C of this process ends the child too (terminated, then killed
-    after 3 s), and on Linux the child also dies when this process is killed. Returns its exit status, or 0
-    when stopped by a signal."""
+    """Run ``cmd`` in a process group of its own and wait; SIGTERM or Ctrl-C of this process ends the whole group
+    (SIGTERM, then SIGKILL after :data:`STOP_GRACE_S`), and on Linux the child also dies (SIGKILL) when this
+    process is killed. Returns its exit status, or 0 when stopped by a signal."""
     import signal
 
     def stop(signum, frame):
@@ -525,18 +567,14 @@ def run_child(cmd: list[str]) -> int:
     previous = signal.signal(signal.SIGTERM, stop) if main else None
     child = None
     try:
-        child = subprocess.Popen(cmd, preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)
+        child = subprocess.Popen(cmd, preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+                                 start_new_session=True)
         return child.wait()
     except KeyboardInterrupt:
         return 0
     finally:
-        if child is not None and child.poll() is None:
-            child.terminate()
-            try:
-                child.wait(3.0)
-            except subprocess.TimeoutExpired:
-                child.kill()
-                child.wait()
+        if child is not None:
+            _end_group(child)
         if main:
             signal.signal(signal.SIGTERM, previous)
 

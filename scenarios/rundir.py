@@ -28,10 +28,39 @@ class RunFolderError(ValueError):
     """An output folder h4bench may not write (a user's file or folder, an unwritable place)."""
 
 
+def json_safe(obj, _seen: frozenset = frozenset()):
+    """``obj`` with everything JSON cannot hold made plain: numpy values as numbers and lists, a dict key that is
+    not a string as its ``str``, and any other object (a plugin's ``Box.info`` may carry one) as
+    ``{"repr": repr(obj), "type": its class name, "note": "not JSON: its repr"}``; a container that holds itself
+    becomes ``"<recursion>"``."""
+    if obj is None or isinstance(obj, (bool, int, float, str)):
+        return obj
+    if id(obj) in _seen:
+        return "<recursion>"
+    seen = _seen | {id(obj)}
+    if isinstance(obj, dict):
+        return {(k if isinstance(k, str) else str(k)): json_safe(v, seen) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v, seen) for v in obj]
+    try:
+        return json_safe(json_default(obj), seen)
+    except TypeError:
+        pass
+    try:
+        text = repr(obj)
+    except Exception as exc:  # noqa: BLE001 - a repr that raises
+        text = f"<repr raised {type(exc).__name__}>"
+    return {"repr": text, "type": type(obj).__name__, "note": "not JSON: its repr"}
+
+
 def finite_json(obj, indent: int | None = 2) -> str:
     """``obj`` as strict JSON text: numpy values converted, every non-finite number (NaN, +-inf, e.g. a ratio
-    to a missing paper value) written ``null``, so any JSON parser (``JSON.parse``, ``jq``) reads it."""
-    loose = json.dumps(obj, default=json_default)
+    to a missing paper value) written ``null``, so any JSON parser (``JSON.parse``, ``jq``) reads it; anything
+    else JSON cannot hold is written as its ``repr`` (:func:`json_safe`)."""
+    try:
+        loose = json.dumps(obj, default=json_default)
+    except (TypeError, ValueError):  # an object, a non-string key or a cycle: made plain first
+        loose = json.dumps(json_safe(obj), default=json_default)
     return json.dumps(json.loads(loose, parse_constant=lambda _: None), indent=indent, allow_nan=False)
 
 

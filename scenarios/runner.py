@@ -29,7 +29,8 @@ def check_model(path) -> None:
 def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | None = None,
                  out: str | Path | None = None, quick: bool = False, progress=None,
                  scheduler: str | None = None, workers: int | None = None, only: int | None = None,
-                 fresh: bool = False, methods: str | list | None = None, runs: int | None = None) -> dict:
+                 fresh: bool = False, methods: str | list | None = None, runs: int | None = None,
+                 method_timeout: float | None = None) -> dict:
     """Run scenario ``name`` (or a TOML path) and write its folder; returns the result dict.
 
     progress : optional callable(stage, done, total) for a progress display; scheduler, workers : where a
@@ -38,7 +39,8 @@ def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | 
     a campaign, recompute every run instead of resuming; methods : the estimators (``"a,b,c"``, names or
     ``module:attribute``, ``all``: :func:`scenarios.judging.parse_methods`, or a list of those) replacing the
     spec's ``[estimators] methods`` (part of a campaign's provenance: a resumed campaign with other methods
-    recomputes its runs); runs : a campaign's number of runs (``campaign.runs``).
+    recomputes its runs); runs : a campaign's number of runs (``campaign.runs``); method_timeout : seconds each
+    estimator may run (``[estimators] method_timeout``; None: no limit).
     """
     spec = registry.load_spec(name, quick=quick)
     if methods is not None:
@@ -48,6 +50,10 @@ def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | 
             spec["estimators"]["methods"] = parse_methods(methods if isinstance(methods, str) else ",".join(methods))
         except (TypeError, ValueError) as exc:
             raise ScenarioError(f"--methods: {exc}") from None
+    if method_timeout is not None:
+        if isinstance(method_timeout, bool) or not isinstance(method_timeout, (int, float)) or not method_timeout > 0:
+            raise ScenarioError(f"method_timeout must be a number of seconds > 0, got {method_timeout!r}")
+        spec["estimators"]["method_timeout"] = float(method_timeout)
     if runs is not None:
         if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
             raise ScenarioError(f"runs must be an integer >= 1, got {runs!r}")

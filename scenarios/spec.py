@@ -103,9 +103,11 @@ def _check_methods(value, where: str) -> None:
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
         raise ScenarioError(f"{where} must be a list of strings, estimator names (built-in: "
                             f"{tuple(registry.BUILTINS)}), got {value!r}")
+    from h4bench.ident.estimators import isolation
+
     for v in value:
         try:
-            registry.get(v)
+            isolation.resolve(v)  # a plugin's import code runs in a child process, never here
         except (EstimatorError, TypeError) as exc:
             raise ScenarioError(f"{where}: {exc}") from None
 

@@ -40,7 +40,7 @@ from h4bench.ident.errors import EstimatorError
 from h4bench.ident.estimators.checks import check_problem, real_array
 
 __all__ = ["BUILTINS", "CLAIMS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS", "Available", "Estimator",
-           "available", "call", "claims_table", "declare", "get", "register", "takes"]
+           "available", "call", "claims_table", "declare", "entry_point_names", "get", "register", "takes"]
 
 ENTRY_POINT_GROUP = "h4bench.estimators"
 KINDS = ("guaranteed", "statistical")
@@ -229,18 +229,51 @@ def _from_entry_point(ep) -> Estimator:
     return _from_callable(func, ep.name, origin)
 
 
-def available() -> Available:
-    """The built-ins and the entry points of group :data:`ENTRY_POINT_GROUP`; those that fail to load (or whose
-    name is a built-in's) are listed in ``broken`` with the reason instead of raising."""
-    found, broken = list(BUILTINS.values()), []
+def _unusable(name: str) -> str | None:
+    """Why an entry-point name cannot be a method name (None if it can)."""
+    if not name or name != name.strip() or any(c.isspace() for c in name):
+        return "not a usable method name (empty or with white space)"
+    if "," in name or ":" in name:
+        return "not a usable method name (',' separates methods and ':' marks 'module:attribute')"
+    if name == "all":
+        return "not a usable method name ('all' means every registered estimator)"
+    return None
+
+
+def entry_point_names() -> tuple[list[str], list[tuple[str, str]]]:
+    """The entry points of group :data:`ENTRY_POINT_GROUP`, none loaded: (the usable names, in order; the
+    unusable ones as ``(name, reason)``: a built-in's name, a name two distributions give, a name with ``,`` or
+    ``:`` or white space, ``all``)."""
+    by_name: dict[str, list] = {}
     for ep in _entry_points():
-        if ep.name in BUILTINS:
-            broken.append((ep.name, f"the name of a built-in estimator ({ep.value} not loaded)"))
-            continue
+        by_name.setdefault(ep.name, []).append(ep)
+    usable, problems = [], []
+    for name, eps in by_name.items():
+        dists = sorted({f"{getattr(ep.dist, 'name', '?')} ({ep.value})" for ep in eps})
+        if name in BUILTINS:
+            problems.append((name, f"the name of a built-in estimator ({', '.join(ep.value for ep in eps)} not loaded)"))
+        elif len(dists) > 1 or len(eps) > 1:
+            problems.append((name, f"given by {len(eps)} entry points ({', '.join(dists)}): ambiguous, none loaded"))
+        elif _unusable(name):
+            problems.append((name, f"{_unusable(name)}; {eps[0].value} not loaded"))
+        else:
+            usable.append(name)
+    return usable, problems
+
+
+def available() -> Available:
+    """The built-ins and the entry points of group :data:`ENTRY_POINT_GROUP`; those that fail to load, whose
+    name is a built-in's, is given twice or is unusable (:func:`entry_point_names`) are listed in ``broken`` with
+    the reason instead of raising. This loads every entry point in this process:
+    :func:`ident.estimators.isolation.available` loads each in a child process instead."""
+    found = list(BUILTINS.values())
+    usable, broken = entry_point_names()
+    eps = {ep.name: ep for ep in _entry_points() if ep.name in usable}
+    for name in usable:
         try:
-            found.append(_from_entry_point(ep))
+            found.append(_from_entry_point(eps[name]))
         except EstimatorError as exc:
-            broken.append((ep.name, str(exc)))
+            broken.append((name, str(exc)))
     return Available(tuple(found), tuple(broken))
 
 
@@ -262,9 +295,12 @@ def get(method) -> Estimator:
         return BUILTINS[method]
     if ":" in method:
         return _from_callable(_load(method, method), method, method)
-    for ep in _entry_points():
-        if ep.name == method:
-            return _from_entry_point(ep)
+    eps = [ep for ep in _entry_points() if ep.name == method]
+    if eps:
+        usable, problems = entry_point_names()
+        if method not in usable:
+            raise EstimatorError(f"estimator {method!r}: {dict(problems)[method]}")
+        return _from_entry_point(eps[0])
     raise EstimatorError(f"method must be one of {tuple(BUILTINS)} (or an entry point of {ENTRY_POINT_GROUP!r}, "
                          f"'package.module:attribute' or a callable), got {method!r}")
 

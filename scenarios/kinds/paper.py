@@ -60,7 +60,7 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
 
 def feasible_set(run_, out: Path) -> dict:
     """The projections of the run's feasible set, the methods' sets beside them, ``feasible_set.png``."""
-    from h4bench.ident.estimators import registry
+    from h4bench.ident.estimators import isolation
     from h4bench.scenarios.feasible import drawn_methods, parse_pairs, plot_feasible_set, reference_sets
     from h4bench.scenarios.feasible import feasible_set as project
 
@@ -74,7 +74,7 @@ def feasible_set(run_, out: Path) -> dict:
     sets, seconds, skipped = reference_sets(eq.W, eq.y, eq.bound, run_.prior, methods, boxes=run_.boxes,
                                             groups=np.asarray(eq.joint, dtype=np.int64))
     sets = {m: sets[m] for m in methods if m in sets}
-    kinds = {m: registry.get(m).kind for m in sets}
+    kinds = {m: isolation.resolve(m).estimator.kind for m in sets}
     from h4bench.ident import parameter_units
 
     plot_feasible_set(polys, sets, run_.theta_true, out / "feasible_set.png",
