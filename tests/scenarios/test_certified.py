@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from h4bench.ident.robots.h4_certified import certified_equation
-from h4bench.scenarios.certificate import check_certificate
+from h4bench.scenarios.certificate import certify, check_certificate, processing_of, simulated_error_spec
 from h4bench.scenarios.experiment import run_experiment
-from h4bench.scenarios.kinds import certified as kind
 from h4bench.scenarios.registry import load_spec
 
 
@@ -22,9 +21,9 @@ def run_and_spec():
 
 def _short(run_, spec, n=1500, **change):
     """The certificate on the first n samples with ErrorSpec fields changed."""
-    es = kind.simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
+    es = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
     es = dataclasses.replace(es, **change)
-    proc = dataclasses.replace(kind.processing_of(spec), curvature_every=20)
+    proc = dataclasses.replace(processing_of(spec), curvature_every=20)
     truth = copy.copy(run_.truth)
     for f in ("q", "qd", "qdd", "tau_applied"):
         setattr(truth, f, getattr(run_.truth, f)[:n])
@@ -37,7 +36,7 @@ def test_certified_box_encloses_and_the_certificate_holds_without_an_allowance(r
     spec = copy.deepcopy(spec)
     del spec["bound"]  # the certified path must not read the tuned allowance
     run_.bound_raw = float("nan")
-    out = kind.certify(run_, spec)
+    out = certify(run_, spec)
     cert, entry = out["certificate"], out["certified_entry"]
     assert cert["rows"] > 0 and cert["violations"] == 0 and cert["min_margin"] >= 0
     assert entry["status"] == "ok" and entry["all_enclosed"]
@@ -57,3 +56,26 @@ def test_certificate_catches_an_understated_spec(run_and_spec):
     # a torque error below the injected one
     weak = _short(run_, spec, torque_error=np.full(4, 0.1))
     assert weak["checks"]["torque"]["violations"] > 0
+
+
+@pytest.mark.slow
+def test_enclosure_campaign_with_the_derived_error_model(tmp_path):
+    """`h4bench run enclosure --quick --error-model derived`: 0 certificate violations and 0 misses of the
+    certified box over the campaign's runs (about 50 s on 2 cores)."""
+    from h4bench.scenarios.runner import run_scenario
+
+    result = run_scenario("enclosure", quick=True, out=tmp_path / "enc", workers=2, error_model="derived")
+    cert = result["certificate"]
+    assert cert["runs"] == result["runs"] == 4 and cert["rows"] > 0
+    assert cert["violations"] == 0 and cert["min_margin"] >= 0
+    assert result["methods"]["certified"]["misses"] == 0
+
+
+def test_derived_error_model_is_refused_where_it_is_not_built(tmp_path):
+    from h4bench.scenarios.runner import run_scenario
+    from h4bench.scenarios.spec import ScenarioError
+
+    with pytest.raises(ScenarioError, match="--error-model derived is available for the kinds"):
+        run_scenario("structure", quick=True, out=tmp_path / "s", error_model="derived")
+    with pytest.raises(ScenarioError, match="error_model must be 'tuned' or 'derived'"):
+        run_scenario("paper", quick=True, out=tmp_path / "p", error_model="guessed")
