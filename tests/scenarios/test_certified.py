@@ -2,6 +2,7 @@
 motion or the encoder error is caught by the truth); no allowance is read."""
 
 import copy
+import json
 import dataclasses
 
 import numpy as np
@@ -79,3 +80,36 @@ def test_derived_error_model_is_refused_where_it_is_not_built(tmp_path):
         run_scenario("structure", quick=True, out=tmp_path / "s", error_model="derived")
     with pytest.raises(ScenarioError, match="error_model must be 'tuned' or 'derived'"):
         run_scenario("paper", quick=True, out=tmp_path / "p", error_model="guessed")
+
+
+def test_identify_with_a_spec_gives_the_certified_box(run_and_spec, tmp_path):
+    """`h4bench identify LOG --spec SPEC.toml` on a simulated log: the certified box encloses the simulator's
+    truth (read here only to check), result.json carries the specification; --bound with --spec is refused."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    run_, spec = run_and_spec
+    ds, n = run_.dataset, 1500
+    log = tmp_path / "log.csv"
+    np.savetxt(log, np.column_stack([ds.t[:n], ds.q[:n], ds.tau[:n]]), delimiter=",", comments="", fmt="%.17g",
+               header="t,q1,q2,q3,q4,tau1,tau2,tau3,tau4")
+    es = simulated_error_spec(spec, run_.reference, ds.dt, run_.noise_bound)
+    spec_file = tmp_path / "spec.toml"
+    spec_file.write_text(
+        "[error_model]\nsample_period = 0.001\ncounts_per_turn = 20000\n"
+        f"torque_error = {run_.noise_bound!r}\nqd_max = {es.qd_max.tolist()}\nqdd_max = {es.qdd_max.tolist()}\n"
+        "[error_model.sources]\ntorque_error = 'the simulator: the injected error bound'\n"
+        "[certified]\nkernel_steps = 100\ncurvature_every = 20\n")
+    res = CliRunner().invoke(app, ["identify", str(log), "--spec", str(spec_file), "--out", str(tmp_path / "o"),
+                                   "--json"])
+    assert res.exit_code == 0, res.output
+    result = json.loads(res.stdout)
+    m = result["methods"]["certified"]
+    assert m["status"] == "ok" and result["bound"] is None
+    assert np.all(np.asarray(m["lower"]) <= run_.theta_true) and np.all(run_.theta_true <= np.asarray(m["upper"]))
+    assert result["error_model"]["sources"]["torque_error"].startswith("the simulator")
+    assert json.loads((tmp_path / "o" / "result.json").read_text())["rows"] == result["rows"] > 0
+    bad = CliRunner().invoke(app, ["identify", str(log), "--spec", str(spec_file), "--bound", "1.5",
+                                   "--out", str(tmp_path / "p")])
+    assert bad.exit_code == 2 and "--bound does not apply with --spec" in bad.output
