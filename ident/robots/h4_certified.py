@@ -29,6 +29,7 @@ from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.processing.weakform import (coulomb_columns, imot_columns, make_kernel, nonlinear_columns,
                                                row_windows, torque_rows, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
+from h4bench.ident.robots.h4_interval import IntervalEquation
 
 __all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "Processing", "certified_equation", "curvature_bounds",
            "nacelle_terms"]
@@ -49,26 +50,16 @@ class Processing:
 
 
 @dataclass(frozen=True)
-class CertifiedEquation:
+class CertifiedEquation(IntervalEquation):
     """``y in [Wc - D, Wc + D] theta + [-bound, bound]`` row by row (rows ``4 r + i``: window r, joint i).
 
     Wc, D (m, 14); y, bound (m,) [N m]; sample (m,) the centre sample of each row's window; joint (m,);
-    terms: the radii by origin, ``torque``, ``model``, ``rounding`` (m,) [N m] and ``measurement``,
-    ``second_order``, ``truncation``, ``sign`` (m, 14) (units of W); D is the sum of the four matrices, bound
-    the sum of the three vectors."""
+    names the columns; terms: the radii by origin, ``torque``, ``model``, ``rounding`` (m,) [N m] and
+    ``measurement``, ``second_order``, ``truncation``, ``sign`` (m, 14) (units of W); D is the sum of the four
+    matrices, bound the sum of the three vectors; info: the settings and what is not proven."""
 
-    Wc: np.ndarray
-    D: np.ndarray
-    y: np.ndarray
-    bound: np.ndarray
-    sample: np.ndarray
-    joint: np.ndarray
-    names: tuple
-    terms: dict
-    info: dict = field(default_factory=dict)
-
-    def __len__(self) -> int:
-        return self.y.size
+    names: tuple = PARAMETER_NAMES
+    terms: dict = field(default_factory=dict, compare=False)
 
 
 def nacelle_terms(geometry, q, qd, x=None, x0=None):
@@ -207,5 +198,5 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
                            f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds",
                            "gradients of the Mnac, Ibc per-step functions by central differences"]}
     return CertifiedEquation(Wc=cols["value"].reshape(m, p), D=D, y=y.reshape(m), bound=bound,
-                             sample=np.repeat(windows.centre, N_JOINTS), joint=np.tile(joint, R),
-                             names=PARAMETER_NAMES, terms=terms, info=info)
+                             sample=np.repeat(windows.centre, N_JOINTS), joint=np.tile(joint, R), info=info,
+                             names=PARAMETER_NAMES, terms=terms)
