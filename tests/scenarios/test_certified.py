@@ -43,6 +43,12 @@ def test_certified_box_encloses_and_the_certificate_holds_without_an_allowance(r
     assert entry["status"] == "ok" and entry["all_enclosed"]
     assert "allowance" not in out["error_model"] and cert["motion_bounds"]["held"]
     assert cert["terms"]["torque"] == pytest.approx(run_.noise_bound, rel=1e-12)  # kernel of unit integral
+    # every key the certified path adds is documented in docs/results.md (section `certified`)
+    from tests.test_docs import documented
+
+    doc = documented("`certified`")
+    keys = {f"certificate.{k}" for k in cert} | {"error_model", "width_vs_tuned", "width_vs_tuned_geomean"}
+    assert keys <= set(doc), sorted(keys - set(doc))
 
 
 def test_certificate_catches_an_understated_spec(run_and_spec):
