@@ -119,3 +119,23 @@ def test_identify_with_a_spec_gives_the_certified_box(run_and_spec, tmp_path):
     bad = CliRunner().invoke(app, ["identify", str(log), "--spec", str(spec_file), "--bound", "1.5",
                                    "--out", str(tmp_path / "p")])
     assert bad.exit_code == 2 and "--bound does not apply with --spec" in bad.output
+
+
+@pytest.mark.slow
+def test_run_certified_quick_json(tmp_path):
+    """`h4bench run certified --quick --json`: one JSON document with the certificate (rows > 0, 0 violations,
+    margin >= 0, each term's radius), the error model, the certified method enclosing the truth beside the tuned
+    hull, and the width ratio."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    res = CliRunner().invoke(app, ["run", "certified", "--quick", "--json", "--out", str(tmp_path / "c")])
+    assert res.exit_code == 0, res.output
+    r = json.loads(res.stdout)
+    c = r["certificate"]
+    assert c["rows"] > 0 and c["violations"] == 0 and c["min_margin"] >= 0
+    assert set(c["terms"]) == {"torque", "model", "rounding", "measurement", "second_order", "truncation", "sign"}
+    assert r["error_model"]["position_resolution"] == [2 * np.pi / 20000] * 4
+    assert r["methods"]["certified"]["all_enclosed"] and r["methods"]["hull"]["status"] == "ok"
+    assert 0 < r["width_vs_tuned_geomean"] <= 1.5
