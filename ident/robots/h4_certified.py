@@ -65,12 +65,12 @@ class CertifiedEquation(IntervalEquation):
 def nacelle_terms(geometry, q, qd, x=None, x0=None):
     """P, F (S, 4, 2) of the Mnac and Ibc columns at states q, qd (S, 4) (module docstring); x (S, 4) the nacelle
     poses of q if known, else forward kinematics started at x0 (S, 4) (default the home pose)."""
-    from h4bench.sim.kinematics import _jacobian_dot, _jacobians, forward_kinematics  # noqa: PLC0415
+    from h4bench.sim.kinematics import forward_kinematics, jacobian_dot, jacobians  # noqa: PLC0415
 
     if x is None:
         x = np.atleast_2d(forward_kinematics(geometry, q, x0=x0))
-    jac = _jacobians(geometry, q, x)
-    jd = _jacobian_dot(geometry, jac, qd)
+    jac = jacobians(geometry, q, x)
+    jd = jacobian_dot(geometry, q, qd, x)
     J = jac.J
     xd = np.einsum("sab,sb->sa", J, qd)
     P = np.empty(q.shape + (2,))
