@@ -227,6 +227,8 @@ def run(
     runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
     method_timeout: Optional[float] = typer.Option(None, help="seconds each estimator may run per run (default: no "
                                                    "limit); a method over it is failed: timeout"),
+    error_model: str = typer.Option("tuned", help="tuned (the spec's bound) or derived (enclosure: add the "
+                                    "certified box from the [error_model] table and check its certificate)"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd).
 
@@ -244,7 +246,8 @@ def run(
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
                                   scheduler=scheduler, workers=workers, only=only, fresh=fresh,
-                                  methods=methods, runs=runs, method_timeout=method_timeout)
+                                  methods=methods, runs=runs, method_timeout=method_timeout,
+                                  error_model=error_model)
     except CampaignInterrupted as exc:
         typer.secho(f"stopped: {exc}", fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130)
@@ -330,8 +333,12 @@ def scenarios() -> None:
 def identify(
     file: Path = typer.Argument(..., help="CSV log: header t,q1..q4,tau1..tau4 (SI units; with --urdf "
                                 "t,q1..qn,tau1..taun, joint side)"),
-    bound: str = typer.Option(..., help="bound on |tau - W theta| for every raw sample [N m]: one number, "
-                              "4 (n) comma-separated numbers (joints 1..4 (n)) or, H4 only, a .toml/.csv file"),
+    bound: Optional[str] = typer.Option(None, help="bound on |tau - W theta| for every raw sample [N m]: one "
+                                        "number, 4 (n) comma-separated numbers (joints 1..4 (n)) or, H4 only, a "
+                                        ".toml/.csv file (required unless --spec)"),
+    spec: Optional[Path] = typer.Option(None, help="H4: an error specification (TOML [error_model], optional "
+                                        "[certified]): the certified box from the derived interval equation, "
+                                        "instead of --bound"),
     urdf: Optional[Path] = typer.Option(None, help="a serial robot's URDF: identify its base parameters in a "
                                         "physical prior (--mass, --reach) instead of the H4's 14"),
     mass: Optional[str] = typer.Option(None, help="--urdf: total mass of the prior [kg] (default 2 x the URDF's)"),
@@ -383,7 +390,12 @@ def identify(
         except ValueError as exc:
             raise OptionError(f"--method must name estimators ({' | '.join(METHODS)}, several comma-separated, all, "
                               f"or an estimator plugin), got {method!r}: {exc}") from None
-        if urdf is not None:
+        if spec is not None and urdf is None:
+            result = _identify_h4_spec(file, spec, bound, method, prior, prior_lower, prior_upper, model, out,
+                                       torque_timing, pairs)
+        elif bound is None:
+            raise OptionError("--bound is required (or --spec FILE for the H4's certified box), got neither")
+        elif urdf is not None:
             if torque_timing != "hold":
                 raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
                                   f"regressor at the sample instants), got --torque-timing {torque_timing}")
@@ -511,6 +523,21 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=wrist,
         cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out, pairs=pairs,
         timeout=timeout)
+
+
+def _identify_h4_spec(file, spec, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing,
+                      pairs) -> dict:
+    from h4bench.scenarios.identify import OptionError, load_prior, parse_number
+    from h4bench.scenarios.identify_certified import identify_certified_csv
+
+    for name, value in (("--bound", bound), ("--method", None if method == "hull" else method),
+                        ("--torque-timing", None if torque_timing == "hold" else torque_timing), ("--pairs", pairs)):
+        if value is not None:
+            raise OptionError(f"{name} does not apply with --spec (the certified box rests on the specification "
+                              f"alone, torques held over each step), got {name} {value}")
+    lo, hi = parse_number(prior_lower, "--prior-lower"), parse_number(prior_upper, "--prior-upper")
+    box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
+    return identify_certified_csv(file, spec, box, model=model, out=out)
 
 
 def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold",

@@ -54,7 +54,9 @@ PASS, FAIL, SKIP = "pass", "fail", "skip"
 @dataclass(frozen=True)
 class Problem:
     """A generated bounded-error problem: W (N, p), y (N,), bound (N,) > 0, prior a Box, the context (``groups``
-    (N,) ints, ``instruments`` (N, p)), and whether its feasible set is empty by construction."""
+    (N,) ints, ``instruments`` (N, p), ``regressor_radius`` (N, p) zeros: the point regressor as an interval one, so
+    that an interval-regressor estimator's feasible set is the same set), and whether its feasible set is empty by
+    construction."""
 
     name: str
     description: str
@@ -125,7 +127,7 @@ class ConformanceReport:
 def _problem(name, description, W, y, bound, prior, groups=None, empty=False) -> Problem:
     W = np.ascontiguousarray(W, dtype=float)
     groups = np.arange(W.shape[0], dtype=np.int64) % 4 if groups is None else np.asarray(groups, dtype=np.int64)
-    context = {"groups": groups, "instruments": W.copy()}
+    context = {"groups": groups, "instruments": W.copy(), "regressor_radius": np.zeros_like(W)}
     return Problem(name, description, W, np.asarray(y, dtype=float), np.broadcast_to(
         np.asarray(bound, dtype=float), (W.shape[0],)).copy(), prior, context, empty)
 

@@ -45,6 +45,9 @@ __all__ = ["BUILTINS", "CLAIMS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS
 ENTRY_POINT_GROUP = "h4bench.estimators"
 KINDS = ("guaranteed", "statistical")
 CONTEXT_KEYWORDS = ("groups", "instruments")  #: the public context, passed to a ``**kwargs`` estimator
+#: context an estimator gets only when it declares it: ``regressor_radius`` ((N, p) >= 0: W is the interval matrix
+#: ``[W - r, W + r]``, the derived interval equation of a certified error model; the ``certified`` estimator)
+DECLARED_ONLY_CONTEXT = ("regressor_radius",)
 CLAIMS = ("kind", "rigorous", "level", "description", "citation", "context")  #: the attributes that are claims
 
 
@@ -317,6 +320,11 @@ def _check_context(context: dict, n: int, p: int) -> dict:
         if z.shape != (n, p):
             raise ValueError(f"instruments must have shape ({n}, {p}) like W, got {z.shape}")
         out["instruments"] = z
+    if out.get("regressor_radius") is not None:
+        d = real_array(out["regressor_radius"], "regressor_radius")
+        if d.shape != (n, p) or not np.all(d >= 0):
+            raise ValueError(f"regressor_radius must have shape ({n}, {p}) like W with entries >= 0, got {d.shape}")
+        out["regressor_radius"] = d
     return out
 
 
@@ -394,3 +402,4 @@ register("contractor", "h4bench.ident.estimators.contractor:contractor")
 register("ols", "h4bench.ident.estimators.statistical:ols")
 register("wls", "h4bench.ident.estimators.statistical:wls")
 register("iv", "h4bench.ident.estimators.statistical:iv")
+register("certified", "h4bench.ident.estimators.uncertain:certified")
