@@ -9,7 +9,10 @@ settings, targets, nominal parameters, the remaining design options and the sour
 (:data:`CODE_FILES`, so an edit invalidates old entries). Files are written atomically (temp file +
 ``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
 and inputs, and passes :func:`trajectories.check_trajectory` again on the caller's geometry and limits;
-otherwise it is recomputed and overwritten (never trusted). A cache that cannot be written (a read-only
+otherwise it is recomputed and overwritten (never trusted). An entry loaded and checked once is kept in the
+process (:data:`MEMORY_SIZE` entries) and returned again while its file is unchanged, so a campaign's worker
+loads and checks each shared design once; :func:`cache_stats` says how the calls were served and what they
+cost. A cache that cannot be written (a read-only
 folder, ``H4BENCH_CACHE`` naming a file) never costs a run: the design is returned uncached and a
 :class:`CacheWarning` says why.
 """
@@ -19,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import time
 import warnings
 from dataclasses import asdict, fields
 from pathlib import Path
@@ -146,8 +150,9 @@ def design_excitation(geometry, duration: float = 10.0, seed: int = 0, limits=No
     inputs = cache_inputs(geometry, duration, seed, limits, criterion, settings, targets, theta, opts)
     key = cache_key(inputs)
     path = cache_dir() / f"{key}.npz"
-    if cache and path.is_file():
-        hit = _load_valid(path, key, inputs, geometry, limits, theta)
+    started = time.perf_counter()
+    if cache:
+        hit = _recall(path, key, inputs, geometry, limits, theta)
         if hit is not None:
             return hit
     traj = fourier_excitation(geometry, duration=duration, seed=seed, limits=limits, theta_nominal=theta,
@@ -163,4 +168,51 @@ def design_excitation(geometry, duration: float = 10.0, seed: int = 0, limits=No
             warnings.warn(f"the trajectory cache {str(path.parent)!r} cannot be written ({exc.strerror or exc}); "
                           f"the design is used without caching it (set {CACHE_ENV} to a writable folder)",
                           CacheWarning, stacklevel=2)
+    _count("computed", started)
+    return traj
+
+
+#: Designs kept in this process (cache key -> (the entry file's signature, the checked Trajectory)).
+_MEMORY: dict = {}
+MEMORY_SIZE = 32
+_STATS = {"memory": 0, "disk": 0, "computed": 0, "seconds_memory": 0.0, "seconds_disk": 0.0,
+          "seconds_computed": 0.0}
+
+
+def _count(source: str, started: float) -> None:
+    _STATS[source] += 1
+    _STATS[f"seconds_{source}"] += time.perf_counter() - started
+
+
+def cache_stats() -> dict:
+    """How this process's :func:`design_excitation` calls were served so far: counts ``memory`` (an entry loaded
+    and checked earlier in this process, its file unchanged), ``disk`` (loaded and checked), ``computed``
+    (designed), and the seconds spent in each (``seconds_memory``, ...). A copy; take differences around a
+    call to time one lookup."""
+    return dict(_STATS)
+
+
+def _recall(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Trajectory | None:
+    """The cached design at ``path`` (module docstring), checked once per process: an entry already loaded
+    and checked here is returned again while its file keeps the same signature (size, modification time,
+    inode); the key covers the geometry, limits and nominal parameters the check depends on."""
+    started = time.perf_counter()
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    signature = (st.st_size, st.st_mtime_ns, st.st_ino)
+    kept = _MEMORY.get(key)
+    if kept is not None and kept[0] == signature:
+        _count("memory", started)
+        return kept[1]
+    traj = _load_valid(path, key, inputs, geometry, limits, theta)
+    if traj is None:
+        return None
+    for arr in (traj.t, traj.x, traj.q, traj.qd, traj.qdd):
+        arr.setflags(write=False)  # shared by the calls that recall it
+    if len(_MEMORY) >= MEMORY_SIZE:
+        _MEMORY.pop(next(iter(_MEMORY)))
+    _MEMORY[key] = (signature, traj)
+    _count("disk", started)
     return traj
