@@ -35,6 +35,7 @@ import h4bench
 from h4bench import sim
 from h4bench.scenarios.rundir import prepare_folder, write_json
 from h4bench.scenarios.spec import ScenarioError
+from h4bench.scenarios.threads import single_blas_thread
 from h4bench.scenarios.timings import TimedJob, campaign_timings, timing_lines
 
 # spec keys that do not change what a run computes
@@ -120,7 +121,9 @@ def _watch_parent(parent: int) -> None:
 
 
 def _worker_init(parent: int) -> None:
-    """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides)."""
+    """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides), one
+    BLAS thread (:mod:`scenarios.threads`: the pool has a worker per core)."""
+    single_blas_thread()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the campaign's handler (inherited through fork)
     if sys.platform.startswith("linux"):

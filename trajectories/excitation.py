@@ -8,8 +8,11 @@ every input that changes the result: the geometry's arrays, the limits, seed, du
 settings, targets, nominal parameters, the remaining design options and the source code of the design modules
 (:data:`CODE_FILES`, so an edit invalidates old entries). Files are written atomically (temp file +
 ``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
-and inputs, and passes :func:`trajectories.check_trajectory` again on the caller's geometry and limits;
-otherwise it is recomputed and overwritten (never trusted). An entry loaded and checked once is kept in the
+and inputs, and either holds exactly the arrays that passed :func:`trajectories.check_trajectory` when it was
+designed (their SHA-256 and the check report's, stored with the entry, :func:`content_hash`: the key already
+covers the geometry, limits, nominal parameters and the checks' code, so the check would repeat itself) or, for
+an entry without that hash, passes the check again on the caller's geometry and limits; otherwise it is
+recomputed and overwritten (never trusted). An entry loaded and checked once is kept in the
 process (:data:`MEMORY_SIZE` entries) and returned again while its file is unchanged, so a campaign's worker
 loads and checks each shared design once; :func:`cache_stats` says how the calls were served and what they
 cost. A cache that cannot be written (a read-only
@@ -97,6 +100,17 @@ def cache_key(inputs: dict) -> str:
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
 
 
+def content_hash(traj: Trajectory) -> str:
+    """SHA-256 of a trajectory's arrays (dtype, shape, bytes) and of its check report (JSON)."""
+    h = hashlib.sha256()
+    for name in ("t", "x", "q", "qd", "qdd"):
+        arr = np.ascontiguousarray(getattr(traj, name))
+        h.update(f"{name}:{arr.dtype.str}:{arr.shape}".encode())
+        h.update(arr.tobytes())
+    h.update(json.dumps(traj.checks, sort_keys=True, default=str).encode())
+    return h.hexdigest()
+
+
 def _load_valid(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Trajectory | None:
     try:
         traj = Trajectory.load(path)
@@ -105,6 +119,9 @@ def _load_valid(path: Path, key: str, inputs: dict, geometry, limits, theta) -> 
     meta = traj.parameters.get("cache", {})
     if meta.get("key") != key or meta.get("inputs") != json.loads(json.dumps(inputs)):
         return None
+    if meta.get("content") is not None and meta["content"] == content_hash(traj) \
+            and (traj.checks or {}).get("feasible") is True:
+        return traj  # the very arrays that passed the checks when designed, under the same inputs and code
     try:
         report = check_trajectory(geometry, traj, limits, theta, raise_on_violation=False)
     except Exception:  # noqa: BLE001
@@ -157,7 +174,7 @@ def design_excitation(geometry, duration: float = 10.0, seed: int = 0, limits=No
             return hit
     traj = fourier_excitation(geometry, duration=duration, seed=seed, limits=limits, theta_nominal=theta,
                               criterion=criterion, processing=settings, targets=targets, **opts)
-    params = dict(traj.parameters, cache={"key": key, "inputs": inputs})
+    params = dict(traj.parameters, cache={"key": key, "inputs": inputs, "content": content_hash(traj)})
     traj = Trajectory(t=traj.t, x=traj.x, q=traj.q, qd=traj.qd, qdd=traj.qdd, kind=traj.kind, parameters=params,
                       checks=traj.checks)
     if cache:
