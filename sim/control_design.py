@@ -336,9 +336,10 @@ def design_joint_controller(J, Fv, bandwidth_hz: float = 20.0, dt: float = 1e-3,
     velocity_filter_hz : cut-off of the velocity estimate the law receives (:class:`VelocityFilter`),
     None if the caller passes exact velocities.
 
-    Returns a :class:`ControllerDesign` (immutable: frozen, read-only arrays). Designs are cached per process
-    by their inputs (J and Fv bit for bit and the other arguments; :data:`DESIGN_CACHE_SIZE` entries): a campaign
-    whose runs share the nominal parameters designs once per worker, and the same inputs give the same object.
+    Returns a :class:`ControllerDesign` (immutable: frozen, read-only arrays). Designs are cached by their inputs
+    (J and Fv bit for bit and the other arguments): per process (:data:`DESIGN_CACHE_SIZE` entries; the same
+    inputs give the same object) and on disk (:mod:`sim.design_cache`, every float stored exactly), so a
+    campaign's worker designs nothing and loads no python-control once any process has designed the same.
     Raises ValueError for bad inputs (non-positive J, negative Fv,
     bandwidth at or above the Nyquist frequency, wrong shapes), for a phase margin that cannot be reached, or
     if the sampled loop is unstable.
@@ -376,7 +377,13 @@ def design_joint_controller(J, Fv, bandwidth_hz: float = 20.0, dt: float = 1e-3,
     key = (J.tobytes(), Fv.tobytes(), bandwidth_hz, dt, pm_deg, velocity_filter_hz)
     design = _DESIGNS.get(key)
     if design is None:
-        design = _design(J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+        from h4bench.sim.design_cache import design_key, load_design, store_design
+
+        disk_key = design_key(J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+        design = load_design(disk_key, J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+        if design is None:
+            design = _design(J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+            store_design(disk_key, design)
         if len(_DESIGNS) >= DESIGN_CACHE_SIZE:
             _DESIGNS.pop(next(iter(_DESIGNS)))
         _DESIGNS[key] = design

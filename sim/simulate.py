@@ -12,7 +12,9 @@ Per sample k (period ``dt``, ``substeps`` MuJoCo steps of ``h = dt / substeps``,
 The torque error follows a small protocol, so that structured error models (another module) plug in:
 ``stream = noise.start(t, rng)`` (t (n,) sample times from 0 [s], rng a numpy Generator) gives
 ``stream.at(k, q, tau_cmd) -> (4,)`` [N m] per sample (q (4,) true motor angles [rad], tau_cmd (4,) the clipped
-command) and ``stream.measured(tau_cmd (n, 4)) -> (n, 4)`` the logged torques; ``noise.bound`` [N m] bounds
+command) and ``stream.measured(tau_cmd (n, 4)) -> (n, 4)`` the logged torques; optionally ``stream.at_list(k, q, tau_cmd)``,
+the same values on lists of 4 Python floats (the loop then keeps the built-in law's floats, no arrays per
+sample); ``noise.bound`` [N m] bounds
 ``|applied - logged|`` and ``noise.describe()`` is a JSON-able dict. :mod:`sim.noise` implements it
 (:class:`~sim.noise.TorqueNoise`, one shape; :class:`~sim.noise.TorqueError`, a sum of components); both are
 re-exported here.
@@ -224,8 +226,12 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     append_cmd, append_qm = rec_cmd.append, rec_qm.append
     wall = time.perf_counter()
     try:
-        _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc, rec_app,
-              act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
+        if isinstance(law, _FloatLaw) and callable(getattr(stream, "at_list", None)):
+            _loop_floats(n, qpos, qvel, qacc, qm, law.step_list, ctrl, stream.at_list, forward, model, data, rec_qpos,
+                         rec_qvel, rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
+        else:
+            _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel,
+                  rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
     except ValueError as exc:  # e.g. rounding a NaN angle: the state diverged
         if np.all(np.isfinite(qpos)):
             raise
@@ -277,6 +283,30 @@ def _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, da
         q_meas, tau_cmd = law_step(k, q_true)
         tau_cmd = array(tau_cmd)
         ctrl[:] = tau_cmd + at(k, q_true, tau_cmd)
+        forward(model, data)  # at the sampled state: MuJoCo's qacc, applied torque, loop violation
+        rec_qpos[k] = qpos
+        rec_qvel[k] = qvel
+        rec_qacc[k] = qacc
+        rec_app[k] = act
+        efc[k, :ne] = efc_pos[:ne]
+        append_cmd(tau_cmd)
+        append_qm(q_meas)
+        advance()
+        if progress is not None and k % 1000 == 0:
+            progress(k, n)
+
+
+def _loop_floats(n, qpos, qvel, qacc, qm, law_step, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc,
+                 rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress):
+    """:func:`_loop` for the built-in law (:class:`_FloatLaw`) and a stream with ``at_list``: the angles, the
+    command and the error stay Python floats from the state to ``ctrl`` (the same IEEE operations: the sum
+    ``tau_cmd + e`` per joint, as numpy's)."""
+    for k in range(n):
+        q_true = qpos[qm].tolist()
+        q_meas, tau_cmd = law_step(k, q_true)
+        e0, e1, e2, e3 = at(k, q_true, tau_cmd)
+        t0, t1, t2, t3 = tau_cmd
+        ctrl[:] = (t0 + e0, t1 + e1, t2 + e2, t3 + e3)
         forward(model, data)  # at the sampled state: MuJoCo's qacc, applied torque, loop violation
         rec_qpos[k] = qpos
         rec_qvel[k] = qvel
@@ -355,8 +385,12 @@ class _FloatLaw:
         self.q_ref, self.qd_ref, self.ff = q_ref.tolist(), qd_ref.tolist(), ff.tolist()
 
     def step(self, k, q_true):
+        return self.step_list(k, q_true.tolist())
+
+    def step_list(self, k, q_true):
+        """:meth:`step` with q_true a list of 4 floats [rad]; returns (q_meas, tau) lists."""
         res = self.res
-        qm = [round(v / res) * res for v in q_true.tolist()] if res else q_true.tolist()
+        qm = [round(v / res) * res for v in q_true] if res else q_true
         q_prev = qm if self.q_prev is None else self.q_prev
         p, g = self.pole, self.gain
         integ, e_prev, qd_est, tau, sat = [], [], [], [], []
