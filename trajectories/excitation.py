@@ -189,7 +189,7 @@ def design_excitation(geometry, duration: float = 10.0, seed: int = 0, limits=No
     return traj
 
 
-#: Designs kept in this process (cache key -> (the entry file's signature, the checked Trajectory)).
+#: Designs kept in this process (entry path -> ((key, size, mtime, inode) of the file, the checked Trajectory)).
 _MEMORY: dict = {}
 MEMORY_SIZE = 32
 _STATS = {"memory": 0, "disk": 0, "computed": 0, "seconds_memory": 0.0, "seconds_disk": 0.0,
@@ -218,8 +218,8 @@ def _recall(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Traj
         st = path.stat()
     except OSError:
         return None
-    signature = (st.st_size, st.st_mtime_ns, st.st_ino)
-    kept = _MEMORY.get(key)
+    signature = (key, st.st_size, st.st_mtime_ns, st.st_ino)
+    kept = _MEMORY.get(str(path))
     if kept is not None and kept[0] == signature:
         _count("memory", started)
         return kept[1]
@@ -230,6 +230,6 @@ def _recall(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Traj
         arr.setflags(write=False)  # shared by the calls that recall it
     if len(_MEMORY) >= MEMORY_SIZE:
         _MEMORY.pop(next(iter(_MEMORY)))
-    _MEMORY[key] = (signature, traj)
+    _MEMORY[str(path)] = (signature, traj)
     _count("disk", started)
     return traj
