@@ -291,7 +291,9 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                     result["provenance"] = prov
                     t_io = time.perf_counter()
                     write_json(run_path(out, i), result)
-                    sections["io"] += time.perf_counter() - t_io
+                    t_io = time.perf_counter() - t_io
+                    sections["io"] += t_io
+                    result.setdefault("timings", {})["io"] = t_io  # in memory: the file cannot hold its own time
                     runs[i] = result
                     progress(f"campaign (reused {reused})" if reused else "campaign", len(runs) + len(errors), n)
         except KeyboardInterrupt:
