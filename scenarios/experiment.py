@@ -130,10 +130,12 @@ def make_reference(spec: dict, geometry, seed: int):
 def traced_reference(spec: dict, geometry, seed: int):
     """:func:`make_reference` and where it came from: ``"memory"``, ``"disk"`` (the design cache) or
     ``"computed"`` (:func:`trajectories.excitation.cache_stats`), ``"direct"`` for the legacy cond design."""
+    from h4bench.scenarios.threads import original_blas_threads
     from h4bench.trajectories.excitation import cache_stats
 
     before = cache_stats()
-    reference = make_reference(spec, geometry, seed)
+    with original_blas_threads():  # a design follows the BLAS thread count (scenarios.threads)
+        reference = make_reference(spec, geometry, seed)
     after = cache_stats()
     source = next((k for k in ("memory", "disk", "computed") if after[k] != before[k]), "direct")
     return reference, source

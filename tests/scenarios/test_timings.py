@@ -9,7 +9,6 @@ import pytest
 
 from h4bench.scenarios import campaign as camp
 from h4bench.scenarios.registry import load_spec
-from h4bench.scenarios.threads import single_blas_thread
 from h4bench.scenarios.timings import STAGES, TimedJob, campaign_timings, run_stages, timing_lines
 
 
@@ -58,21 +57,24 @@ def test_the_engine_times_runs_and_its_own_sections(tmp_path):
     assert TimedJob(sleepy_job)(spec, 0, 1)["timings"]["run"] >= 0.05
 
 
-def test_single_blas_thread_in_a_fresh_process():
+def test_single_blas_thread_and_the_original_counts_in_a_fresh_process():
+    import json
+    import os
     import subprocess
     import sys
 
-    code = ("import ctypes, numpy as np\n"
-            "from h4bench.scenarios.threads import single_blas_thread\n"
-            "libs = single_blas_thread()\n"
+    code = ("import json, numpy as np\n"
+            "from h4bench.scenarios import threads\n"
+            "import scipy.linalg\n"
+            "counts = lambda: [g() for _, _, g in threads._openblas_libraries()]\n"
+            "before = counts()\n"
+            "n = len(threads.single_blas_thread())\n"
+            "one = counts()\n"
+            "with threads.original_blas_threads():\n"
+            "    inside = counts()\n"
             "a = np.arange(9.0).reshape(3, 3)\n"
-            "assert (a @ a)[0, 0] == 15.0\n"
-            "for p in libs:\n"
-            "    lib = ctypes.CDLL(p)\n"
-            "    for n in ('scipy_openblas_get_num_threads64_', 'openblas_get_num_threads'):\n"
-            "        f = getattr(lib, n, None)\n"
-            "        if f is not None: print(n, f())\n"
-            "import os; print(os.environ['OPENBLAS_NUM_THREADS'])\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
-    assert out[-1] == "1" and all(v == "1" for v in out[1:-1:2])
-    assert single_blas_thread is not None
+            "print(json.dumps([n, before, one, inside, counts(), float((a @ a)[0, 0])]))\n")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "2"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env).stdout
+    n, before, one, inside, after, check = json.loads(out)
+    assert n >= 1 and before == [2] * n and one == after == [1] * n and inside == before and check == 15.0
