@@ -2,7 +2,7 @@
 same simulated time, and its runs per minute with every estimator, measured in one run.
 
     python benchmarks/bench_campaign.py [--runs 8] [--all-runs 8] [--all-workers 2] [--repeats 3] [--skip-all]
-                                        [--out DIR] [--json]
+                                        [--out DIR] [--json] [--base-python OTHER_VENV/bin/python]
 
 1. The campaign's designed trajectories (``campaign.trajectories`` of them, full size) are looked up in the
    design cache first (a cold cache designs them now: the time is printed, not counted below).
@@ -15,6 +15,10 @@ same simulated time, and its runs per minute with every estimator, measured in o
    under 10 % of the wall time).
 4. ``--methods all`` with ``--all-runs`` runs on ``--all-workers`` workers: runs per minute (the campaign's
    wall, pool start-up and report included).
+
+5. ``--base-python``: the same campaigns with another checkout's interpreter (``python -m h4bench``; e.g. a venv
+   of the base commit), interleaved with this checkout's, after warming that checkout's own design cache entries:
+   its ratio to the same bare-stepping reference and the speed-ups, measured in the same run.
 
 Every figure is one wall-clock measurement on a possibly shared machine: compare the ratios of one run, not
 the absolute seconds, and repeat the command for the spread.
@@ -45,6 +49,7 @@ import argparse
 import json
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -55,8 +60,17 @@ import numpy as np
 from h4bench import ident
 from h4bench import sim
 from h4bench.scenarios import registry
-from h4bench.scenarios.experiment import feedforward, make_noise, make_reference
-from h4bench.trajectories.excitation import cache_stats
+from h4bench.scenarios.experiment import make_noise, make_reference
+
+try:  # this checkout's helpers; the benchmark also measures an older checkout (--base) without them
+    from h4bench.scenarios.experiment import feedforward
+    from h4bench.trajectories.excitation import cache_stats
+except ImportError:  # pragma: no cover - an older checkout
+    def feedforward(geometry, theta, reference):
+        return ident.inverse_dynamics(geometry, theta, reference.q, reference.qd, reference.qdd)
+
+    def cache_stats():
+        return {"memory": 0, "disk": 0, "computed": 0}
 
 
 def warm_designs(spec: dict) -> tuple[float, dict]:
@@ -104,9 +118,22 @@ def bare_stepping(torques: np.ndarray, reference, copies: int) -> float:
     return total
 
 
-def campaign(methods: str, runs: int, workers: int, out: Path) -> tuple[float, dict]:
+_WARM = ("from h4bench import sim\nfrom h4bench.scenarios import registry\n"
+         "from h4bench.scenarios.experiment import make_reference\n"
+         "spec = registry.load_spec('enclosure')\ng = sim.H4Geometry.from_model(sim.load_model())\n"
+         "for i in range(spec['campaign']['trajectories']):\n    make_reference(spec, g, spec['seed'] + i)\n")
+
+
+def warm_base(python: str) -> float:
+    """The other checkout's designs of the campaign, in its own design cache entries (seconds)."""
+    t0 = time.perf_counter()
+    subprocess.run([python, "-c", _WARM], check=True, capture_output=True)
+    return time.perf_counter() - t0
+
+
+def campaign(methods: str, runs: int, workers: int, out: Path, python: str = sys.executable) -> tuple[float, dict]:
     """The command a user runs (a fresh interpreter: imports and pool start-up count); (wall seconds, result)."""
-    cmd = ["h4bench", "run", "enclosure", "--methods", methods, "--runs", str(runs), "--workers", str(workers),
+    cmd = [python, "-m", "h4bench", "run", "enclosure", "--methods", methods, "--runs", str(runs), "--workers", str(workers),
            "--fresh", "--json", "--out", str(out)]
     t0 = time.perf_counter()
     done = subprocess.run(cmd, capture_output=True, text=True)
@@ -126,6 +153,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=None, help="keep the campaigns' folders here")
     parser.add_argument("--json", action="store_true", help="print the figures as one JSON document")
     parser.add_argument("--threads", default=None, help="BLAS threads of this process (see _setup.py)")
+    parser.add_argument("--base-python", default=None,
+                        help="the interpreter of another checkout (e.g. the base commit's venv): its campaigns are "
+                             "run too, interleaved, and the ratios printed side by side")
     args = parser.parse_args()
 
     spec = registry.load_spec("enclosure")
@@ -135,27 +165,38 @@ def main() -> None:
     bare = [bare_stepping(torques, reference, args.runs)]
     figures: dict = {"runs": args.runs, "simulated_seconds": args.runs * duration, "design_lookup_seconds": design_s,
                      "designs_served": served}
+    if args.base_python:
+        figures["base_design_lookup_seconds"] = warm_base(args.base_python)
     with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
         root = args.out or Path(tmp)
+        if args.base_python:
+            base_wall, _ = campaign("hull", args.runs, 1, root / "base-hull", args.base_python)
+            figures["base_hull"] = {"wall": base_wall}
+            bare.append(bare_stepping(torques, reference, args.runs))
         wall, result = campaign("hull", args.runs, 1, root / "hull")
         for _ in range(max(1, args.repeats) - 1):
             bare.append(bare_stepping(torques, reference, args.runs))
-        t = result["campaign"]["timings"]
-        figures["hull"] = {"wall": wall, "campaign_wall": t["wall"], "overhead": t["overhead"],
-                           "overhead_share": t["overhead_share"],
-                           "stage_medians": {k: v["median"] for k, v in t["stages"].items()},
-                           "run_median": t["run_seconds"]["median"]}
+        t = result["campaign"].get("timings") or {}  # absent in an older checkout
+        figures["hull"] = {"wall": wall, "campaign_wall": t.get("wall", result["campaign"]["seconds"]),
+                           "overhead": t.get("overhead"), "overhead_share": t.get("overhead_share"),
+                           "stage_medians": {k: v["median"] for k, v in t.get("stages", {}).items()},
+                           "run_median": (t.get("run_seconds") or {}).get("median")}
         if not args.skip_all:
+            if args.base_python:
+                base_all, _ = campaign("all", args.all_runs, args.all_workers, root / "base-all", args.base_python)
+                figures["base_all"] = {"wall": base_all, "runs_per_minute": 60.0 * args.all_runs / base_all}
             wall_all, result_all = campaign("all", args.all_runs, args.all_workers, root / "all")
-            ta = result_all["campaign"]["timings"]
+            ta = result_all["campaign"].get("timings") or {}
             figures["all"] = {"wall": wall_all, "runs": args.all_runs, "workers": args.all_workers,
                               "runs_per_minute": 60.0 * args.all_runs / wall_all,
-                              "overhead_share": ta["overhead_share"],
-                              "method_medians": {k: v["median"] for k, v in ta["methods"].items()}}
+                              "overhead_share": ta.get("overhead_share"),
+                              "method_medians": {k: v["median"] for k, v in ta.get("methods", {}).items()}}
             bare.append(bare_stepping(torques, reference, args.runs))
     figures["bare_seconds"] = statistics.median(bare)
     figures["bare_all"] = bare
     figures["ratio"] = figures["hull"]["wall"] / figures["bare_seconds"]
+    if "base_hull" in figures:
+        figures["base_ratio"] = figures["base_hull"]["wall"] / figures["bare_seconds"]
     if args.json:
         print(json.dumps(figures, indent=1))
         return
@@ -164,16 +205,25 @@ def main() -> None:
     print(f"bare mj_step of {args.runs} x {duration:g} s: median {figures['bare_seconds']:.3f} s "
           f"(measurements {', '.join(f'{b:.3f}' for b in bare)})")
     print(f"h4bench run enclosure --methods hull --runs {args.runs} --workers 1: {h['wall']:.3f} s wall "
-          f"(campaign {h['campaign_wall']:.3f} s) -> "
-          f"{figures['ratio']:.2f}x bare stepping (goal <= 3x); median run {h['run_median']:.3f} s; overhead "
-          f"outside the runs {h['overhead']:.3f} s = {100 * h['overhead_share']:.1f} % of the campaign's wall "
-          "(goal < 10 %)")
+          f"(campaign {h['campaign_wall']:.3f} s) -> {figures['ratio']:.2f}x bare stepping (goal <= 3x)")
+    if h["overhead"] is not None:
+        print(f"  median run {h['run_median']:.3f} s; overhead outside the runs {h['overhead']:.3f} s = "
+              f"{100 * h['overhead_share']:.1f} % of the campaign's wall (goal < 10 %)")
     print("  stage medians per run [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in h["stage_medians"].items()))
+    if "base_hull" in figures:
+        print(f"  base checkout ({args.base_python}): {figures['base_hull']['wall']:.3f} s -> "
+              f"{figures['base_ratio']:.2f}x bare stepping; this checkout is "
+              f"{figures['base_hull']['wall'] / h['wall']:.2f}x faster")
     if "all" in figures:
         a = figures["all"]
+        share = "n/a" if a["overhead_share"] is None else f"{100 * a['overhead_share']:.1f} %"
         print(f"enclosure --methods all --runs {a['runs']} --workers {a['workers']}: {a['wall']:.2f} s -> "
-              f"{a['runs_per_minute']:.1f} runs/min; overhead {100 * a['overhead_share']:.1f} %")
+              f"{a['runs_per_minute']:.1f} runs/min; overhead {share}")
         print("  method medians per run [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in a["method_medians"].items()))
+        if "base_all" in figures:
+            b = figures["base_all"]
+            print(f"  base checkout: {b['wall']:.2f} s -> {b['runs_per_minute']:.1f} runs/min; this checkout "
+                  f"{a['runs_per_minute'] / b['runs_per_minute']:.2f}x the runs per minute (goal >= 2.5x)")
 
 
 if __name__ == "__main__":

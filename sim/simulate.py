@@ -222,16 +222,15 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     rec_cmd, rec_qm = [], []
     qm = _index(geometry.qpos_motor)
     qpos, qvel, qacc, ctrl, act, efc_pos = data.qpos, data.qvel, data.qacc, data.ctrl, data.actuator_force, data.efc_pos
-    at, forward, law_step, array = stream.at, mujoco.mj_forward, law.step, np.array
+    if isinstance(law, _FloatLaw) and callable(getattr(stream, "at_list", None)):
+        at = stream.at_list  # floats from the state to ctrl: no array per sample
+    else:
+        at = _array_at(stream.at)
     append_cmd, append_qm = rec_cmd.append, rec_qm.append
     wall = time.perf_counter()
     try:
-        if isinstance(law, _FloatLaw) and callable(getattr(stream, "at_list", None)):
-            _loop_floats(n, qpos, qvel, qacc, qm, law.step_list, ctrl, stream.at_list, forward, model, data, rec_qpos,
-                         rec_qvel, rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
-        else:
-            _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel,
-                  rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
+        _loop(n, qpos, qvel, qacc, qm, law.step_list, ctrl, at, mujoco.mj_forward, model, data, rec_qpos, rec_qvel,
+              rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
     except ValueError as exc:  # e.g. rounding a NaN angle: the state diverged
         if np.all(np.isfinite(qpos)):
             raise
@@ -275,32 +274,11 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     return dataset, truth
 
 
-def _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc,
+def _loop(n, qpos, qvel, qacc, qm, law_step, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc,
           rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress):
-    """The 1 kHz sample loop of :func:`simulate` (locals only: the loop is the simulator's bottleneck)."""
-    for k in range(n):
-        q_true = qpos[qm].copy()  # the noise stream may keep it
-        q_meas, tau_cmd = law_step(k, q_true)
-        tau_cmd = array(tau_cmd)
-        ctrl[:] = tau_cmd + at(k, q_true, tau_cmd)
-        forward(model, data)  # at the sampled state: MuJoCo's qacc, applied torque, loop violation
-        rec_qpos[k] = qpos
-        rec_qvel[k] = qvel
-        rec_qacc[k] = qacc
-        rec_app[k] = act
-        efc[k, :ne] = efc_pos[:ne]
-        append_cmd(tau_cmd)
-        append_qm(q_meas)
-        advance()
-        if progress is not None and k % 1000 == 0:
-            progress(k, n)
-
-
-def _loop_floats(n, qpos, qvel, qacc, qm, law_step, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc,
-                 rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress):
-    """:func:`_loop` for the built-in law (:class:`_FloatLaw`) and a stream with ``at_list``: the angles, the
-    command and the error stay Python floats from the state to ``ctrl`` (the same IEEE operations: the sum
-    ``tau_cmd + e`` per joint, as numpy's)."""
+    """The 1 kHz sample loop of :func:`simulate` (locals only: the loop is the simulator's bottleneck). The true
+    angles go to the law and the error stream as a list of floats; the applied torque is ``tau_cmd + e`` per
+    joint (the same IEEE sums as numpy's)."""
     for k in range(n):
         q_true = qpos[qm].tolist()
         q_meas, tau_cmd = law_step(k, q_true)
@@ -318,6 +296,14 @@ def _loop_floats(n, qpos, qvel, qacc, qm, law_step, ctrl, at, forward, model, da
         advance()
         if progress is not None and k % 1000 == 0:
             progress(k, n)
+
+
+def _array_at(at):
+    """A stream's ``at(k, q, tau_cmd)`` for :func:`_loop`: the protocol's (4,) arrays built from its lists (a new
+    array each sample: the stream may keep them)."""
+    def at_arrays(k, q, tau_cmd, _array=np.array):
+        return at(k, _array(q, dtype=float), _array(tau_cmd, dtype=float))
+    return at_arrays
 
 
 def _index(addresses: np.ndarray):
@@ -357,7 +343,9 @@ class _ArrayLaw:
         self.vfilter, self.res, self.lo, self.hi = vfilter, res, lo, hi
         self.q_ref, self.qd_ref, self.ff = q_ref, qd_ref, ff
 
-    def step(self, k, q_true):
+    def step_list(self, k, q_true):
+        """One sample: q_true a list of 4 floats [rad]; returns (q_meas, tau) (4,) arrays."""
+        q_true = np.array(q_true, dtype=float)
         res = self.res
         q_meas = np.round(q_true / res) * res if res else q_true
         tau = np.clip(self.law(self.q_ref[k], self.qd_ref[k], q_meas, self.vfilter.step(q_meas), self.ff[k]),
@@ -383,9 +371,6 @@ class _FloatLaw:
         self.qd_est = vf._qd.tolist()
         self.q_prev = None if vf._q_prev is None else vf._q_prev.tolist()
         self.q_ref, self.qd_ref, self.ff = q_ref.tolist(), qd_ref.tolist(), ff.tolist()
-
-    def step(self, k, q_true):
-        return self.step_list(k, q_true.tolist())
 
     def step_list(self, k, q_true):
         """:meth:`step` with q_true a list of 4 floats [rad]; returns (q_meas, tau) lists."""

@@ -32,6 +32,17 @@ def _array(x, name: str, shape: tuple) -> np.ndarray:
     return arr
 
 
+def _floats(x, name: str) -> list:
+    """A (4,) float array as a list of 4 Python floats (anything else through :func:`_array`'s checks)."""
+    try:
+        out = x.tolist()
+        if len(out) == N_JOINTS and all(isinstance(v, float) for v in out):
+            return out
+    except (AttributeError, TypeError):
+        pass
+    return _array(x, name, (N_JOINTS,)).tolist()
+
+
 class ErrorStream:
     """One realisation of a :class:`TorqueError` over sample times ``t`` (n,) [s] (see :meth:`TorqueError.start`).
 
@@ -74,21 +85,8 @@ class ErrorStream:
             self._pre[k]
         except (IndexError, TypeError):
             raise NoiseModelError(f"k must be an integer sample index in [0, {self.n}), got {k!r}") from None
-        ql = tl = None
-        if self._ripple:
-            try:
-                ql = q.tolist()
-                if len(ql) != N_JOINTS or not all(isinstance(v, float) for v in ql):
-                    raise ValueError
-            except (AttributeError, ValueError, TypeError):
-                ql = _array(q, "q", (N_JOINTS,)).tolist()
-        if self._gain:
-            try:
-                tl = tau_cmd.tolist()
-                if len(tl) != N_JOINTS or not all(isinstance(v, float) for v in tl):
-                    raise ValueError
-            except (AttributeError, ValueError, TypeError):
-                tl = _array(tau_cmd, "tau_cmd", (N_JOINTS,)).tolist()
+        ql = _floats(q, "q") if self._ripple else None
+        tl = _floats(tau_cmd, "tau_cmd") if self._gain else None
         return np.array(self.at_list(k, ql, tl))
 
     def at_list(self, k: int, q: list, tau_cmd: list) -> tuple:
