@@ -380,7 +380,8 @@ def design_joint_controller(J, Fv, bandwidth_hz: float = 20.0, dt: float = 1e-3,
         from h4bench.sim.design_cache import design_key, load_design, store_design
 
         disk_key = design_key(J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
-        design = load_design(disk_key, J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+        design = load_design(disk_key, J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz, ControllerDesign,
+                             LoopReport)
         if design is None:
             design = _design(J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
             store_design(disk_key, design)

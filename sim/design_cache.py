@@ -109,10 +109,10 @@ def store_design(key: str, design) -> None:
 
 
 def load_design(key: str, J: np.ndarray, Fv: np.ndarray, bandwidth_hz: float, dt: float, pm_deg: float,
-                velocity_filter_hz: float | None):
-    """The stored design of ``key`` when it parses and holds exactly these inputs, else None."""
-    from h4bench.sim.control_design import ControllerDesign, LoopReport
-
+                velocity_filter_hz: float | None, design_type, report_type):
+    """The stored design of ``key`` built with ``design_type(**fields)`` and ``report_type(**fields)`` (the
+    ControllerDesign and LoopReport classes, passed in: this module imports no design code) when it parses and
+    holds exactly these inputs, else None."""
     try:
         entry = json.loads(_path(key).read_text())
         if entry.get("key") != key:
@@ -124,15 +124,16 @@ def load_design(key: str, J: np.ndarray, Fv: np.ndarray, bandwidth_hz: float, dt
                 c = np.empty(poles.shape, dtype=complex)
                 c.real, c.imag = poles, _unhex(d["poles_imag"])
                 poles = c
-            return LoopReport(**{k: float.fromhex(d[k]) for k in _REPORT_FLOATS}, poles=poles, stable=bool(d["stable"]))
+            return report_type(**{k: float.fromhex(d[k]) for k in _REPORT_FLOATS}, poles=poles,
+                               stable=bool(d["stable"]))
 
         vf = None if entry["velocity_filter_hz"] is None else float.fromhex(entry["velocity_filter_hz"])
         arrays = {k: _unhex(entry[k]) for k in ("J", "Fv", "kp", "kv", "ki")}
-        design = ControllerDesign(**arrays, dt=float.fromhex(entry["dt"]), velocity_filter_hz=vf,
-                                  bandwidth_hz=float.fromhex(entry["bandwidth_hz"]),
-                                  phase_margin_deg=float.fromhex(entry["phase_margin_deg"]),
-                                  continuous=tuple(report(d) for d in entry["continuous"]),
-                                  discrete=tuple(report(d) for d in entry["discrete"]))
+        design = design_type(**arrays, dt=float.fromhex(entry["dt"]), velocity_filter_hz=vf,
+                             bandwidth_hz=float.fromhex(entry["bandwidth_hz"]),
+                             phase_margin_deg=float.fromhex(entry["phase_margin_deg"]),
+                             continuous=tuple(report(d) for d in entry["continuous"]),
+                             discrete=tuple(report(d) for d in entry["discrete"]))
     except (OSError, ValueError, KeyError, TypeError):
         return None
     same = (np.array_equal(design.J, J) and np.array_equal(design.Fv, Fv) and design.dt == dt
