@@ -36,7 +36,7 @@ from h4bench import sim
 from h4bench.scenarios.rundir import prepare_folder, write_json
 from h4bench.scenarios.spec import ScenarioError
 from h4bench.scenarios.threads import single_blas_thread
-from h4bench.scenarios.timings import TimedJob, campaign_timings, timing_lines
+from h4bench.scenarios.timings import TimedJob, campaign_timings, imported_packages, timing_lines
 
 # spec keys that do not change what a run computes
 _NOT_INPUTS = {"name", "description", "quick", "quick_applied"}
@@ -245,6 +245,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     n = camp["runs"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ScenarioError(f"campaign.runs must be an integer >= 1, got {n!r}")
+    imports = imported_packages()  # timed apart: code_hash imports them, and forked workers inherit them
     prov = provenance(spec, seed)
     out = prepare_folder(out, what={"scenario": spec["name"], "kind": spec["kind"]})
     saved_path = out / "campaign.json"
@@ -271,7 +272,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     reused = len(runs)
     todo = [i for i in range(n) if i not in runs]
     progress(f"campaign (reused {reused})" if reused else "campaign", reused, n)
-    sections = {"setup": time.perf_counter() - started, "io": 0.0}
+    sections = {"imports": imports, "setup": time.perf_counter() - started - imports, "io": 0.0}
     started = time.perf_counter()
     errors: dict[int, str] = {}
     if todo:
