@@ -35,10 +35,24 @@ cache; 2 shared cores, before this benchmark's changes, commit e1fa711), 4.27 s 
     error budget (scenarios.budget)                                           0.26 s
     hull 0.17 s; min consistent bound 0.02 s; processing 0.14 s
 
-After (same run, same machine; see the report for the figures): the design cached per process by its inputs,
-the checked design kept per process and not re-checked when its stored content hash matches, the feed-forward
-kept per trajectory, one regressor evaluation shared by the equation and the budget, the width analysis on
-demand (``--only INDEX``) rather than in every campaign run, one BLAS thread per campaign worker.
+After (the same profile, same machine, load about 4.5 on the 2 cores; a worker's second run of a trajectory),
+1.10 s in all: simulation 0.66 s (the loop 0.83 s under the profiler's overhead), the H4 regressor 2 evaluations
+(processed equation and error budget share one; the budget's other is on the true states) 0.25 s, hull 0.16 s,
+error budget 0.11 s, processing 0.12 s, min consistent bound 0.013 s, WLS 0.007 s, trajectory 0.005 s (recalled),
+controller 0.002 s (cached). Removed: the design computed once per process and stored on disk by its inputs
+(``sim.design_cache``), the checked trajectory design kept per process and not re-checked when its stored content
+hash matches, the feed-forward kept per trajectory, one regressor evaluation shared by the equation and the
+budget, the width analysis on demand (``--only INDEX``) rather than in every campaign run, one BLAS thread per
+campaign worker (a trajectory design keeps the process's count), the simulation loop on floats through the noise
+stream (``at_list``).
+
+Measured (2026-12-02, 2 cores shared with other engineers' campaigns, load 7-9; one run of this script with
+``--base-python`` on the base commit's venv): bare stepping of 8 x 10 s median 5.44 s; ``--methods hull``, 8 runs,
+1 worker: the command 37.7 s (6.9x; base 57.0 s, 10.5x), the campaign 21.0 s (3.9x), its pool 16.6 s (3.05x;
+base 43.9 s), overhead 21.5 % (setup 3.3 s: the provenance's code hash imports every package; report 1.05 s);
+``--methods all``, 8 runs, 2 workers: 9.9 runs/min against the base's 6.6 (1.52x), overhead 28 % (report and
+plots 7.0 s). The command's time outside the campaign (interpreter, imports of every scenario kind) was 16.7 s
+of the 37.7 s under that load.
 """
 
 from __future__ import annotations
