@@ -122,8 +122,7 @@ def _watch_parent(parent: int) -> None:
 
 def _worker_init(parent: int) -> None:
     """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides), one
-    BLAS thread (:mod:`scenarios.threads`: the pool has a worker per core)."""
-    single_blas_thread()
+    BLAS thread (:mod:`scenarios.threads`: the pool has a worker per core; set last, after the signals)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the campaign's handler (inherited through fork)
     if sys.platform.startswith("linux"):
@@ -135,6 +134,7 @@ def _worker_init(parent: int) -> None:
     if os.getppid() != parent:
         os._exit(3)
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+    single_blas_thread()
 
 
 def _executor(camp: dict):
