@@ -52,7 +52,10 @@ Measured (2026-12-02, 2 cores shared with other engineers' campaigns, load 7-9; 
 base 43.9 s), overhead 21.5 % (setup 3.3 s: the provenance's code hash imports every package; report 1.05 s);
 ``--methods all``, 8 runs, 2 workers: 9.9 runs/min against the base's 6.6 (1.52x), overhead 28 % (report and
 plots 7.0 s). The command's time outside the campaign (interpreter, imports of every scenario kind) was 16.7 s
-of the 37.7 s under that load.
+of the 37.7 s under that load. A second run of the final code (load about 4): bare 4.41 s; hull: the command
+17.8 s (4.03x; base 41.3 s, 9.38x: 2.33x faster), the campaign 14.3 s (3.23x), its pool 12.7 s (2.87x; base
+35.3 s), overhead 11.8 % (5.8 % without the parent's package imports, 0.86 s, that the forked worker inherits);
+all: 21.0 runs/min against 10.7 (1.97x; pools 15.3 s against 38.3 s), overhead 23.9 % (report 3.4 s).
 """
 
 from __future__ import annotations
