@@ -22,14 +22,18 @@ PARTS = ("noise", "derivatives", "model")
 
 
 def error_budget(geometry, dataset, truth, settings: ProcessingSettings, structure: str = "paper",
-                 theta=None) -> dict:
+                 theta=None, raw=None) -> dict:
     """Max |.| (and 99th percentile) of each part of the oracle residual, raw and after the processing.
 
     Returns {"raw": {part: {"max", "p99"}}, "processed": {...}, "total_raw_max", "total_processed_max",
-    "rows_processed"}; theta defaults to the truth's (for the extended structure pass the 22 values).
+    "rows_processed"}; theta defaults to the truth's (for the extended structure pass the 22 values); raw : the
+    dataset's ``raw_equation(geometry, dataset.q, dataset.tau, dataset.dt, settings, structure)`` when the caller
+    has it already (evaluated here otherwise).
     """
     theta = truth.theta if theta is None else np.asarray(theta, dtype=float)
-    w_est, y, keep, samples, _ = raw_equation(geometry, dataset.q, dataset.tau, dataset.dt, settings, structure)
+    if raw is None:
+        raw = raw_equation(geometry, dataset.q, dataset.tau, dataset.dt, settings, structure)
+    w_est, y, keep, samples, _ = raw
     w_exact = regressor(geometry, truth.q[samples], truth.qd[samples], truth.qdd[samples], structure=structure)
     parts = {
         "noise": -truth.noise[samples].reshape(-1),

@@ -36,6 +36,8 @@ from h4bench import sim
 from h4bench.scenarios import plugins
 from h4bench.scenarios.rundir import prepare_folder, write_json
 from h4bench.scenarios.spec import ScenarioError
+from h4bench.scenarios.threads import single_blas_thread
+from h4bench.scenarios.timings import TimedJob, campaign_timings, imported_packages, timing_lines
 
 # spec keys that do not change what a run computes
 _NOT_INPUTS = {"name", "description", "quick", "quick_applied"}
@@ -132,7 +134,8 @@ def _watch_parent(parent: int) -> None:
 
 
 def _worker_init(parent: int) -> None:
-    """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides)."""
+    """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides), one
+    BLAS thread (:mod:`scenarios.threads`: the pool has a worker per core; set last, after the signals)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the campaign's handler (inherited through fork)
     if sys.platform.startswith("linux"):
@@ -144,6 +147,7 @@ def _worker_init(parent: int) -> None:
     if os.getppid() != parent:
         os._exit(3)
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+    single_blas_thread()
 
 
 def _executor(camp: dict):
@@ -250,9 +254,11 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     resuming what matches; returns (runs in index order, info with ``reused``, ``computed``, ``seconds``,
     ``runs_per_minute``). ``job`` must be a picklable top-level function."""
     camp = spec["campaign"]
+    started_wall, started = time.time(), time.perf_counter()
     n = camp["runs"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ScenarioError(f"campaign.runs must be an integer >= 1, got {n!r}")
+    imports = imported_packages()  # timed apart: code_hash imports them, and forked workers inherit them
     prov = provenance(spec, seed)
     out = prepare_folder(out, what={"scenario": spec["name"], "kind": spec["kind"]})
     saved_path = out / "campaign.json"
@@ -279,6 +285,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     reused = len(runs)
     todo = [i for i in range(n) if i not in runs]
     progress(f"campaign (reused {reused})" if reused else "campaign", reused, n)
+    sections = {"imports": imports, "setup": time.perf_counter() - started - imports, "io": 0.0}
     started = time.perf_counter()
     errors: dict[int, str] = {}
     if todo:
@@ -289,7 +296,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
             if client is not None:
                 plugins.ship_plugins(client, spec.get("estimators", {}).get("methods", []))
             with _TermAsInterrupt():
-                futures = {executor.submit(job, spec, i, seed): i for i in todo}
+                futures = {executor.submit(TimedJob(job), spec, i, seed): i for i in todo}
                 for fut in concurrent.futures.as_completed(futures):
                     i = futures[fut]
                     try:
@@ -298,7 +305,11 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                         errors[i] = f"{type(exc).__name__}: {exc}"
                         continue
                     result["provenance"] = prov
+                    t_io = time.perf_counter()
                     write_json(run_path(out, i), result)
+                    t_io = time.perf_counter() - t_io
+                    sections["io"] += t_io
+                    result.setdefault("timings", {})["io"] = t_io  # in memory: the file cannot hold its own time
                     runs[i] = result
                     progress(f"campaign (reused {reused})" if reused else "campaign", len(runs) + len(errors), n)
         except KeyboardInterrupt:
@@ -328,7 +339,9 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     info = {"reused": reused, "computed": computed, "seconds": seconds,
             "runs_per_minute": 60.0 * computed / seconds if computed and seconds > 0 else None,
             "workers": camp["workers"] or (os.cpu_count() or 1), "scheduler": camp["scheduler"] or None,
-            "provenance": prov}
+            "provenance": prov,
+            # finished by write_outputs (scenarios.timings.campaign_timings)
+            "timings": {"started": started_wall, "sections": {**sections, "pool": seconds}, "computed": todo}}
     return [runs[i] for i in range(n)], info
 
 
@@ -343,8 +356,15 @@ def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: 
     from h4bench.sim.dataset import atomic_write_bytes
 
     out = Path(out)
+    t_report = time.perf_counter()
     plot_relative_widths(result, runs, out / "widths.png")
     plot_coverage(result["methods"], out / "coverage.png")
+    info = result["campaign"]
+    staged = info.get("timings") or {}
+    if "started" in staged:  # the engine's staging dict -> the campaign's timings (docs/results.md)
+        workers = 0 if info.get("scheduler") else info["workers"]
+        sections = {**staged["sections"], "report": time.perf_counter() - t_report}
+        info["timings"] = campaign_timings(runs, staged["computed"], workers, staged["started"], sections)
     lines = [f"# Scenario `{result['scenario']}`: {title}", "", *facts, *throughput_lines(result["campaign"])]
     lines += [f"- {name}: {method_line(name, m)}" for name, m in result["methods"].items()]
     lines += ["", "## Every method side by side", "",
@@ -360,7 +380,7 @@ def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: 
     if failing:
         lines += [""]
     lines += ["", "## Median relative width (width / |true value|) per parameter", "", relative_width_table(result),
-              "", *tail, "Plot: `widths.png`."]
+              "", *tail, "Plot: `widths.png`.", *timing_lines(info.get("timings"))]
     atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
     write_json(out / "result.json", result)
 
@@ -441,17 +461,25 @@ def campaign_experiment(spec: dict, index: int, base_seed: int, estimate: bool =
     index's noise shape, and the trajectory of seed ``base_seed + index % campaign.trajectories`` (one per run
     when 0; a few designed trajectories shared by many runs keep campaigns fast, the design being cached).
     Returns (ExperimentRun, noise shape)."""
-    from h4bench.scenarios.experiment import make_reference, run_experiment
+    from h4bench.scenarios.experiment import run_experiment, traced_reference
 
     seed = base_seed + index
     spec_i = campaign_spec(spec, index)
     path = spec["model"] or None
     spread = spec["campaign"]["parameter_spread"]
+    t0 = time.perf_counter()
     model = sim.randomised_model(seed, spread, path) if spread > 0 else sim.load_model(path)
+    t_model = time.perf_counter() - t0
     n_traj = spec["campaign"]["trajectories"]
-    reference = None
+    reference, source = None, None
+    t0 = time.perf_counter()
     if n_traj:
         geometry = sim.H4Geometry.from_model(model)
-        reference = make_reference(spec_i, geometry, base_seed + index % n_traj)
+        reference, source = traced_reference(spec_i, geometry, base_seed + index % n_traj)
+    t_traj = time.perf_counter() - t0
     run = run_experiment(spec_i, seed, model=model, model_path=path, reference=reference, estimate=estimate)
+    run.timings["model"] = t_model
+    if source is not None:
+        run.timings["trajectory"] += t_traj
+        run.timings["trajectory_source"] = source
     return run, spec_i["noise"]["shape"]

@@ -15,7 +15,7 @@ import numpy as np
 from h4bench import ident
 from h4bench import sim
 from h4bench.ident.processing.filtering import ProcessingSettings
-from h4bench.ident.processing.processing import Equation, build_equation
+from h4bench.ident.processing.processing import Equation, build_equation, raw_equation
 from h4bench.ident.estimators import registry
 from h4bench.scenarios import judging
 from h4bench.scenarios.budget import error_budget
@@ -71,7 +71,10 @@ class ExperimentRun:
                 ok = name in self.boxes
                 outcomes[name] = judging.Outcome(name, est, "ok" if ok else "inconsistent", self.boxes.get(name),
                                                  None if ok else self.failures[name], self.seconds.get(name, 0.0))
+        t0 = time.perf_counter()
         methods = judging.judge(outcomes, self.hull_ref, self.theta_true, names)
+        self.timings["judging"] = time.perf_counter() - t0
+        self.timings["methods"] = dict(self.seconds)
         out = {
             "scenario": self.spec["name"],
             "kind": self.spec["kind"],
@@ -124,6 +127,51 @@ def make_reference(spec: dict, geometry, seed: int):
                                           harmonics=tr["harmonics"], base_hz=tr["base_hz"])
 
 
+def traced_reference(spec: dict, geometry, seed: int):
+    """:func:`make_reference` and where it came from: ``"memory"``, ``"disk"`` (the design cache) or
+    ``"computed"`` (:func:`trajectories.excitation.cache_stats`), ``"direct"`` for the legacy cond design."""
+    from h4bench.scenarios.threads import original_blas_threads
+    from h4bench.trajectories.excitation import cache_stats
+
+    before = cache_stats()
+    with original_blas_threads():  # a design follows the BLAS thread count (scenarios.threads)
+        reference = make_reference(spec, geometry, seed)
+    after = cache_stats()
+    source = next((k for k in ("memory", "disk", "computed") if after[k] != before[k]), "direct")
+    return reference, source
+
+
+_FEEDFORWARD: dict = {}
+FEEDFORWARD_CACHE_SIZE = 16
+
+
+def feedforward(geometry, theta, reference) -> np.ndarray:
+    """The feed-forward torque (n, 4) [N m]: ``ident.inverse_dynamics`` of the reference with the nominal
+    parameters ``theta``, kept per process by its inputs (the geometry, theta and the reference's q, qd, qdd, bit
+    for bit: a campaign's runs share a few trajectories). Read-only."""
+    import hashlib
+
+    from h4bench.trajectories.excitation import geometry_hash
+
+    theta = np.ascontiguousarray(theta, dtype=float)
+    h = hashlib.blake2b(digest_size=20)
+    h.update(geometry_hash(geometry).encode())
+    h.update(theta.tobytes())
+    for name in ("q", "qd", "qdd"):
+        arr = np.ascontiguousarray(getattr(reference, name), dtype=float)
+        h.update(str(arr.shape).encode())
+        h.update(arr.tobytes())
+    key = h.hexdigest()
+    ff = _FEEDFORWARD.get(key)
+    if ff is None:
+        ff = ident.inverse_dynamics(geometry, theta, reference.q, reference.qd, reference.qdd)
+        ff.setflags(write=False)
+        if len(_FEEDFORWARD) >= FEEDFORWARD_CACHE_SIZE:
+            _FEEDFORWARD.pop(next(iter(_FEEDFORWARD)))
+        _FEEDFORWARD[key] = ff
+    return ff
+
+
 def make_noise(spec: dict):
     """The torque error a spec injects (``noise.shape``; see scenarios.spec.DEFAULTS): a sim.TorqueNoise or a
     sim.noise.TorqueError, each with its rigorous ``bound`` [N m]."""
@@ -156,13 +204,15 @@ def run_experiment(spec: dict, seed: int | None = None, model=None, model_path: 
     theta_true = sim.true_parameters(model) if theta_true is None else np.asarray(theta_true, dtype=float)
     nominal = nominal_parameters()
     if reference is None:
-        reference = make_reference(spec, geometry, seed)
+        reference, timings["trajectory_source"] = traced_reference(spec, geometry, seed)
     timings["trajectory"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     design, controller = sim.default_controller(geometry, nominal, bandwidth_hz=spec["controller"]["bandwidth_hz"])
-    ff = ident.inverse_dynamics(geometry, nominal, reference.q, reference.qd, reference.qdd) \
-        if spec["controller"]["feedforward"] else None
+    ff = feedforward(geometry, nominal, reference) if spec["controller"]["feedforward"] else None
+    timings["controller"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
     noise = make_noise(spec)
     dataset, truth = sim.simulate(
         model, reference, noise=noise, controller=controller, feedforward=ff, seed=seed,
@@ -177,14 +227,17 @@ def run_experiment(spec: dict, seed: int | None = None, model=None, model_path: 
     prior = ident.Box(np.full(p, spec["prior"]["lower"]), np.full(p, spec["prior"]["upper"]),
                       ident.parameter_names(structure))
     bound_raw = noise.bound + spec["bound"]["allowance"]
-    equation = build_equation(geometry, dataset, bound_raw, settings, prior=prior, structure=structure)
+    # one regressor evaluation on the estimated motion, shared by the equation and the error budget
+    raw = raw_equation(geometry, dataset.q, dataset.tau, dataset.dt, settings, structure)
+    raw[0].setflags(write=False)
+    equation = build_equation(geometry, dataset, bound_raw, settings, prior=prior, structure=structure, raw=raw)
     timings["processing"] = time.perf_counter() - t0
     run = ExperimentRun(spec=spec, seed=seed, model_path=path, model=model, geometry=geometry,
                         theta_true=theta_true, reference=reference, dataset=dataset, truth=truth, settings=settings,
                         equation=equation, prior=prior, bound_raw=bound_raw, controller_report=design.report(),
                         timings=timings, noise_bound=float(noise.bound), noise_description=noise.describe())
     t0 = time.perf_counter()
-    run.budget = error_budget(geometry, dataset, truth, settings, structure, theta=theta_true)
+    run.budget = error_budget(geometry, dataset, truth, settings, structure, theta=theta_true, raw=raw)
     timings["budget"] = time.perf_counter() - t0
     if estimate:
         estimate_boxes(run)

@@ -336,7 +336,11 @@ def design_joint_controller(J, Fv, bandwidth_hz: float = 20.0, dt: float = 1e-3,
     velocity_filter_hz : cut-off of the velocity estimate the law receives (:class:`VelocityFilter`),
     None if the caller passes exact velocities.
 
-    Returns a :class:`ControllerDesign`. Raises ValueError for bad inputs (non-positive J, negative Fv,
+    Returns a :class:`ControllerDesign` (immutable: frozen, read-only arrays). Designs are cached by their inputs
+    (J and Fv bit for bit and the other arguments): per process (:data:`DESIGN_CACHE_SIZE` entries; the same
+    inputs give the same object) and on disk (:mod:`sim.design_cache`, every float stored exactly), so a
+    campaign's worker designs nothing and loads no python-control once any process has designed the same.
+    Raises ValueError for bad inputs (non-positive J, negative Fv,
     bandwidth at or above the Nyquist frequency, wrong shapes), for a phase margin that cannot be reached, or
     if the sampled loop is unstable.
 
@@ -370,6 +374,32 @@ def design_joint_controller(J, Fv, bandwidth_hz: float = 20.0, dt: float = 1e-3,
         if velocity_filter_hz >= nyquist:
             raise ValueError(f"velocity_filter_hz must be below the Nyquist frequency {nyquist:g} Hz, "
                              f"got {velocity_filter_hz:g}")
+    key = (J.tobytes(), Fv.tobytes(), bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+    design = _DESIGNS.get(key)
+    if design is None:
+        from h4bench.sim.design_cache import design_key, load_design, store_design
+
+        disk_key = design_key(J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+        design = load_design(disk_key, J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz, ControllerDesign,
+                             LoopReport)
+        if design is None:
+            design = _design(J, Fv, bandwidth_hz, dt, pm_deg, velocity_filter_hz)
+            store_design(disk_key, design)
+        if len(_DESIGNS) >= DESIGN_CACHE_SIZE:
+            _DESIGNS.pop(next(iter(_DESIGNS)))
+        _DESIGNS[key] = design
+    return design
+
+
+#: Designs kept per process by :func:`design_joint_controller`, keyed by its inputs (oldest dropped first).
+DESIGN_CACHE_SIZE = 64
+_DESIGNS: dict = {}
+
+
+def _design(J: np.ndarray, Fv: np.ndarray, bandwidth_hz: float, dt: float, pm_deg: float,
+            velocity_filter_hz: float | None) -> ControllerDesign:
+    """:func:`design_joint_controller` on validated arguments (J, Fv (4,) arrays; the rest checked floats)."""
+    nyquist = 0.5 / dt
     tau_v = None if velocity_filter_hz is None else 1.0 / (2 * math.pi * velocity_filter_hz)
     pm = math.radians(pm_deg)
     w_bw = 2 * math.pi * bandwidth_hz

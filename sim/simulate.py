@@ -12,7 +12,9 @@ Per sample k (period ``dt``, ``substeps`` MuJoCo steps of ``h = dt / substeps``,
 The torque error follows a small protocol, so that structured error models (another module) plug in:
 ``stream = noise.start(t, rng)`` (t (n,) sample times from 0 [s], rng a numpy Generator) gives
 ``stream.at(k, q, tau_cmd) -> (4,)`` [N m] per sample (q (4,) true motor angles [rad], tau_cmd (4,) the clipped
-command) and ``stream.measured(tau_cmd (n, 4)) -> (n, 4)`` the logged torques; ``noise.bound`` [N m] bounds
+command) and ``stream.measured(tau_cmd (n, 4)) -> (n, 4)`` the logged torques; optionally ``stream.at_list(k, q, tau_cmd)``,
+the same values on lists of 4 Python floats (the loop then keeps the built-in law's floats, no arrays per
+sample); ``noise.bound`` [N m] bounds
 ``|applied - logged|`` and ``noise.describe()`` is a JSON-able dict. :mod:`sim.noise` implements it
 (:class:`~sim.noise.TorqueNoise`, one shape; :class:`~sim.noise.TorqueError`, a sum of components); both are
 re-exported here.
@@ -220,12 +222,15 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     rec_cmd, rec_qm = [], []
     qm = _index(geometry.qpos_motor)
     qpos, qvel, qacc, ctrl, act, efc_pos = data.qpos, data.qvel, data.qacc, data.ctrl, data.actuator_force, data.efc_pos
-    at, forward, law_step, array = stream.at, mujoco.mj_forward, law.step, np.array
+    if isinstance(law, _FloatLaw) and callable(getattr(stream, "at_list", None)):
+        at = stream.at_list  # floats from the state to ctrl: no array per sample
+    else:
+        at = _array_at(stream.at)
     append_cmd, append_qm = rec_cmd.append, rec_qm.append
     wall = time.perf_counter()
     try:
-        _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc, rec_app,
-              act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
+        _loop(n, qpos, qvel, qacc, qm, law.step_list, ctrl, at, mujoco.mj_forward, model, data, rec_qpos, rec_qvel,
+              rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
     except ValueError as exc:  # e.g. rounding a NaN angle: the state diverged
         if np.all(np.isfinite(qpos)):
             raise
@@ -269,14 +274,17 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
     return dataset, truth
 
 
-def _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc,
+def _loop(n, qpos, qvel, qacc, qm, law_step, ctrl, at, forward, model, data, rec_qpos, rec_qvel, rec_qacc,
           rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress):
-    """The 1 kHz sample loop of :func:`simulate` (locals only: the loop is the simulator's bottleneck)."""
+    """The 1 kHz sample loop of :func:`simulate` (locals only: the loop is the simulator's bottleneck). The true
+    angles go to the law and the error stream as a list of floats; the applied torque is ``tau_cmd + e`` per
+    joint (the same IEEE sums as numpy's)."""
     for k in range(n):
-        q_true = qpos[qm].copy()  # the noise stream may keep it
+        q_true = qpos[qm].tolist()
         q_meas, tau_cmd = law_step(k, q_true)
-        tau_cmd = array(tau_cmd)
-        ctrl[:] = tau_cmd + at(k, q_true, tau_cmd)
+        e0, e1, e2, e3 = at(k, q_true, tau_cmd)
+        t0, t1, t2, t3 = tau_cmd
+        ctrl[:] = (t0 + e0, t1 + e1, t2 + e2, t3 + e3)
         forward(model, data)  # at the sampled state: MuJoCo's qacc, applied torque, loop violation
         rec_qpos[k] = qpos
         rec_qvel[k] = qvel
@@ -288,6 +296,14 @@ def _loop(n, qpos, qvel, qacc, qm, law_step, array, ctrl, at, forward, model, da
         advance()
         if progress is not None and k % 1000 == 0:
             progress(k, n)
+
+
+def _array_at(at):
+    """A stream's ``at(k, q, tau_cmd)`` for :func:`_loop`: the protocol's (4,) arrays built from its lists (a new
+    array each sample: the stream may keep them)."""
+    def at_arrays(k, q, tau_cmd, _array=np.array):
+        return at(k, _array(q, dtype=float), _array(tau_cmd, dtype=float))
+    return at_arrays
 
 
 def _index(addresses: np.ndarray):
@@ -327,7 +343,9 @@ class _ArrayLaw:
         self.vfilter, self.res, self.lo, self.hi = vfilter, res, lo, hi
         self.q_ref, self.qd_ref, self.ff = q_ref, qd_ref, ff
 
-    def step(self, k, q_true):
+    def step_list(self, k, q_true):
+        """One sample: q_true a list of 4 floats [rad]; returns (q_meas, tau) (4,) arrays."""
+        q_true = np.array(q_true, dtype=float)
         res = self.res
         q_meas = np.round(q_true / res) * res if res else q_true
         tau = np.clip(self.law(self.q_ref[k], self.qd_ref[k], q_meas, self.vfilter.step(q_meas), self.ff[k]),
@@ -354,9 +372,10 @@ class _FloatLaw:
         self.q_prev = None if vf._q_prev is None else vf._q_prev.tolist()
         self.q_ref, self.qd_ref, self.ff = q_ref.tolist(), qd_ref.tolist(), ff.tolist()
 
-    def step(self, k, q_true):
+    def step_list(self, k, q_true):
+        """:meth:`step` with q_true a list of 4 floats [rad]; returns (q_meas, tau) lists."""
         res = self.res
-        qm = [round(v / res) * res for v in q_true.tolist()] if res else q_true.tolist()
+        qm = [round(v / res) * res for v in q_true] if res else q_true
         q_prev = qm if self.q_prev is None else self.q_prev
         p, g = self.pole, self.gain
         integ, e_prev, qd_est, tau, sat = [], [], [], [], []

@@ -128,8 +128,25 @@ def select_rows(w, y, bound, qd, settings: ProcessingSettings, taps, theta_abs_m
     return fe, np.flatnonzero(fe.propagate_mask(keep)), keep
 
 
+def _reused_rows(raw, a: int, b: int, q, qd, qdd, p: int):
+    """The regressor rows of samples a..b-1 from ``raw`` (a :func:`raw_equation` result), or None unless ``raw``
+    holds those samples evaluated at exactly these (q, qd, qdd) (bit for bit) with p columns."""
+    if raw is None:
+        return None
+    w, _, _, samples, (rq, rqd, rqdd) = raw
+    if w.ndim != 2 or w.shape[1] != p or samples.size == 0 or w.shape[0] != N_JOINTS * samples.size:
+        return None
+    i0 = a - int(samples[0])
+    i1 = i0 + (b - a)
+    if i0 < 0 or i1 > samples.size or int(samples[i1 - 1]) != b - 1:
+        return None
+    if not (np.array_equal(rq[i0:i1], q) and np.array_equal(rqd[i0:i1], qd) and np.array_equal(rqdd[i0:i1], qdd)):
+        return None
+    return w[N_JOINTS * i0:N_JOINTS * i1]
+
+
 def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None = None, prior=None,
-                   structure: str = "paper", block_samples: int = BLOCK_SAMPLES) -> Equation:
+                   structure: str = "paper", block_samples: int = BLOCK_SAMPLES, raw=None) -> Equation:
     """The processed equation of a :class:`sim.Dataset` (t, q, tau) under a raw-row bound [N m].
 
     bound : the claim ``|tau_measured - W_true theta| <= bound`` on every raw row (noise plus the allowance
@@ -153,6 +170,11 @@ def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None
     estimation error, which the raw bound's allowance covers as it covers the whole record's; the propagated
     bound is computed rigorously for each block's own W, y and raw bounds. Only a row whose joint speed lies
     within ~1e-12 of the speed threshold could be classed differently.
+    raw : optional, :func:`raw_equation` of the same log (e.g. computed for an error budget): its regressor rows
+    are reused where the block's filtered q, qd and qdd equal those it was evaluated at, bit for bit (a log of
+    one block processed with the same settings), instead of evaluating the regressor again. The regressor works
+    row by row, so the rows are the ones it would give here (numpy's batched linear algebra may round a batch
+    of a single sample differently, by an ulp; never a block of a real log).
     Raises ProcessingError (a ValueError) if the log is too short or no row moves fast enough.
     """
     dt = dataset.dt
@@ -195,7 +217,9 @@ def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None
                           timing=settings.torque_timing)
         sl = slice(a - c0, b - c0)
         qd = est.qd[sl]
-        w = regressor(geometry, est.q[sl], qd, est.qdd[sl], structure=structure)
+        w = _reused_rows(raw, a, b, est.q[sl], qd, est.qdd[sl], len(names))
+        if w is None:
+            w = regressor(geometry, est.q[sl], qd, est.qdd[sl], structure=structure)
         y = np.asarray(tau[a:b], dtype=float).reshape(-1)
         rb = _bounds_of(b_raw, a, b)
         fe, rows, keep = select_rows(w, y, float(rb[0]) if scalar else rb, qd, settings, taps, t_abs)

@@ -34,7 +34,8 @@ def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
 def replay_one(spec: dict, index: int, base_seed: int, out: Path, progress) -> dict:
     """Re-run run ``index`` alone and write a full run folder (dataset, truth, report, replay) into ``out``."""
     progress(f"run {index}", 0, 1)
-    spec = {**spec, "replay": {**spec["replay"], "enabled": True}}
+    spec = {**spec, "replay": {**spec["replay"], "enabled": True},
+            "estimators": {**spec["estimators"], "explain": True}}  # the width analysis, on demand
     run_, shape = campaign_experiment(spec, index, base_seed)
     save_run_files(run_, out, progress)
     result = run_.result()

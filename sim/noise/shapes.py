@@ -107,14 +107,21 @@ class PrecomputedTorqueError:
     """A torque-error stream from precomputed values e (n, 4) [N m]: ``at(k, q, tau_cmd) = e[k]``; the logged
     torque is the command itself."""
 
-    __slots__ = ("e",)
+    __slots__ = ("e", "_rows")
 
     def __init__(self, e: np.ndarray) -> None:
         self.e = np.asarray(e, dtype=float)
+        self._rows = None
 
     def at(self, k: int, q: np.ndarray, tau_cmd: np.ndarray) -> np.ndarray:
         """Error (4,) [N m] at sample k (q, tau_cmd unused)."""
         return self.e[k]
+
+    def at_list(self, k: int, q: list, tau_cmd: list) -> list:
+        """:meth:`at` as a list of 4 floats (the simulator's per-sample path; q, tau_cmd unused)."""
+        if self._rows is None:
+            self._rows = self.e.tolist()
+        return self._rows[k]
 
     def measured(self, tau_cmd: np.ndarray) -> np.ndarray:
         """The logged torques (n, 4) [N m]: a copy of the commands."""

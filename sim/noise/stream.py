@@ -32,6 +32,17 @@ def _array(x, name: str, shape: tuple) -> np.ndarray:
     return arr
 
 
+def _floats(x, name: str) -> list:
+    """A (4,) float array as a list of 4 Python floats (anything else through :func:`_array`'s checks)."""
+    try:
+        out = x.tolist()
+        if len(out) == N_JOINTS and all(isinstance(v, float) for v in out):
+            return out
+    except (AttributeError, TypeError):
+        pass
+    return _array(x, name, (N_JOINTS,)).tolist()
+
+
 class ErrorStream:
     """One realisation of a :class:`TorqueError` over sample times ``t`` (n,) [s] (see :meth:`TorqueError.start`).
 
@@ -71,14 +82,21 @@ class ErrorStream:
                 raise IndexError
             if self._fixed:  # nothing depends on the state: the precomputed row (a read-only view)
                 return self.state_independent[k]
-            e0, e1, e2, e3 = self._pre[k]
+            self._pre[k]
         except (IndexError, TypeError):
             raise NoiseModelError(f"k must be an integer sample index in [0, {self.n}), got {k!r}") from None
+        ql = _floats(q, "q") if self._ripple else None
+        tl = _floats(tau_cmd, "tau_cmd") if self._gain else None
+        return np.array(self.at_list(k, ql, tl))
+
+    def at_list(self, k: int, q: list, tau_cmd: list) -> tuple:
+        """:meth:`at` on Python floats, without its argument checks (the simulator's per-sample path): k a valid
+        sample index, q and tau_cmd lists of 4 floats [rad, N m]. Returns the 4 errors [N m] (the same values:
+        the same operations in the same order); raises NoiseModelError for a non-finite error or a command
+        beyond a gain error's torque limit."""
+        e0, e1, e2, e3 = self._pre[k]
         if self._ripple:
-            try:
-                q0, q1, q2, q3 = q.tolist()
-            except (AttributeError, ValueError, TypeError):
-                q0, q1, q2, q3 = _array(q, "q", (N_JOINTS,)).tolist()
+            q0, q1, q2, q3 = q
             sin = math.sin
             try:
                 for n, a, p0, p1, p2, p3 in self._ripple:
@@ -90,10 +108,7 @@ class ErrorStream:
                 _array(q, "q", (N_JOINTS,))
                 raise
         if self._gain:
-            try:
-                t0, t1, t2, t3 = tau_cmd.tolist()
-            except (AttributeError, ValueError, TypeError):
-                t0, t1, t2, t3 = _array(tau_cmd, "tau_cmd", (N_JOINTS,)).tolist()
+            t0, t1, t2, t3 = tau_cmd
             for g0, g1, g2, g3, lim in self._gain:
                 if not (-lim <= t0 <= lim and -lim <= t1 <= lim and -lim <= t2 <= lim and -lim <= t3 <= lim):
                     raise NoiseModelError(f"tau_cmd must be finite and within +-torque_limit = {lim} N m (the "
@@ -105,7 +120,7 @@ class ErrorStream:
         s = e0 + e1 + e2 + e3
         if s - s != 0.0:
             raise NoiseModelError(f"q must be finite (the error at sample {k} is not), got {q!r}")
-        return np.array((e0, e1, e2, e3))
+        return e0, e1, e2, e3
 
     def measured(self, tau_cmd) -> np.ndarray:
         """The torque the robot logs (n, 4) [N m] given all commanded torques tau_cmd (n, 4): the command

@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 from h4bench.scenarios.cli import app
 from h4bench.scenarios.runner import run_scenario
 from h4bench.scenarios.spec import ScenarioError, load_spec
+from h4bench.scenarios.timings import STAGES
 
 SCHEMA_KEYS = ("scenario", "parameters", "true", "bound", "min_consistent_bound", "oracle_residual", "seed", "methods")
 
@@ -95,6 +96,12 @@ def test_enclosure_quick_and_resume(tmp_path):
     result = run_scenario("enclosure", quick=True, out=out, workers=2)
     check_schema(result)
     assert result["runs"] == 4
+    t = result["campaign"]["timings"]  # docs/results.md: where the campaign's time went
+    assert t["runs_computed"] == 4 and t["workers"] == 2 and set(t["stages"]) == set(STAGES)
+    assert t["run_seconds"]["total"] > 0 and t["stages"]["simulation"]["total"] > 0 and "hull" in t["methods"]
+    assert t["overhead"] == pytest.approx(t["wall"] - t["run_seconds"]["total"] / 2)
+    assert sum(t["trajectory_sources"].values()) == 4 and "## Where the time went" in (out / "report.md").read_text()
+    assert "width_analysis" not in json.loads((out / "runs" / "0000.json").read_text())  # on demand (--only)
     for m in result["methods"].values():
         assert m["misses_with_bound_covering_residual"] == []
     assert result["runs_bound_covers_residual"] == 4
@@ -106,6 +113,7 @@ def test_enclosure_quick_and_resume(tmp_path):
     again = run_scenario("enclosure", quick=True, out=out, workers=1)
     assert (out / "runs" / "0001.json").stat().st_mtime_ns == stamp
     assert again["methods"]["hull"]["misses"] == 0 and again["runs"] == 4
+    assert again["campaign"]["timings"]["runs_computed"] == 1  # the reused runs' times are not counted again
 
 
 def test_cli_run_json_and_table(tmp_path, paper_run):
@@ -167,6 +175,7 @@ def test_campaign_run_replayed_alone_is_the_same_run(tmp_path):
     assert alone["seed"] == first["seed"] and alone["noise_shape"] == first["noise_shape"]
     np.testing.assert_array_equal(alone["methods"]["hull"]["lower"], first["methods"]["hull"]["lower"])
     np.testing.assert_array_equal(alone["true"], first["true"])
+    assert "width_analysis" in alone and "width_analysis" not in first  # the width analysis, on demand
     for name in ("result.json", "report.md", "replay.rrd", "dataset.npz", "trajectory.npz"):
         assert (out / "run-0002" / name).is_file(), name
     with pytest.raises(ScenarioError, match="only must be a run index"):

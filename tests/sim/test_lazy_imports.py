@@ -38,9 +38,11 @@ def test_sub_modules_load_only_what_they_import():
     assert mods == {"h4bench.sim", "h4bench.sim.validation", "h4bench.sim.kinematics", "h4bench.sim.model"}
 
 
-def test_designing_a_controller_loads_python_control():
-    mods = _loaded("from h4bench import sim\nsim.design_joint_controller(0.05, 0.1)")
-    assert "control" in mods
+def test_designing_a_controller_loads_python_control(tmp_path):
+    design = (f"import os\nos.environ['H4BENCH_CACHE'] = {str(tmp_path)!r}\n"
+              "from h4bench import sim\nsim.design_joint_controller(0.05, 0.1)")
+    assert "control" in _loaded(design)  # an empty design cache: designed with python-control
+    assert "control" not in _loaded(design)  # then read from the cache (sim.design_cache): no python-control
 
 
 def test_public_names_resolve_and_sim_simulate_is_the_function():
