@@ -63,8 +63,8 @@ import numpy as np
 from h4bench.ident.numerics.interval import up
 from h4bench.ident.processing.errorspec import ErrorSpec
 
-__all__ = ["CertifiedEquation", "SpecCheck", "certified_equation", "check_motion_bounds", "geometry_bounds",
-           "secant_span", "signed_uncertain_hull", "triangle_kernel"]
+__all__ = ["CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "check_motion_bounds",
+           "geometry_bounds", "secant_span", "signed_uncertain_hull", "triangle_kernel"]
 
 TERMS = ("position", "motion", "coulomb", "float", "torque", "model", "rounding")  # regressor side, then torque side
 # the inertial columns' radii by origin (``parts`` of the equation): M(q) within the step, Coriolis + gravity at the
@@ -208,6 +208,8 @@ class _Steps:
         Mc = np.stack([Y(qh, Z, I[b]) - g0 for b in range(n)])  # (b, i, c): column b of M per unit parameter
         Jq = np.empty((n,) + g0.shape)
         dM = np.empty((n, n) + g0.shape)
+        dJv = np.empty((n, n) + g0.shape)  # (k, a, i, c): d/dq_k of dh/dv_a at (qh, vh)
+        Jv = 2 * np.einsum("abic,b->aic", gam, vh)  # exact: h is quadratic in v
         mag = np.abs(f0) + np.abs(g0)
         for k in range(n):
             qk = qh + eta * I[k]
@@ -215,12 +217,13 @@ class _Steps:
             Jq[k] = (Y(qk, vh, Z) - f0) / eta
             for b in range(n):
                 dM[k, b] = (Y(qk, Z, I[b]) - gk - Mc[b]) / eta
+                dJv[k, b] = (0.5 * (Y(qk, vh + I[b], Z) - Y(qk, vh - I[b], Z)) - Jv[b]) / eta
         flt = 4 * _PIN_REL / eta
         # bounds on the true derivatives (forward-difference truncation by Bernstein, pinocchio's float error)
         vs = float(np.sum(np.abs(vh)))
         JqB = np.abs(Jq) + eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]) + flt * (mag + np.abs(Jq) * eta)
         dMB = np.abs(dM) + 2 * eta * geo["M"] + flt * (2 + np.abs(dM) * eta)
-        Jv = 2 * np.einsum("abic,b->aic", gam, vh)  # exact: h is quadratic in v
+        dJvB = np.abs(dJv) + 4 * eta * geo["gamma"] * (vs + 1) + flt * (2 * mag + np.abs(dJv) * eta)
         # speeds and position boxes of the step (true motion)
         ebar = self.ebar[j]
         ev_max = self.ev_mot_max + self.ev_pos[j]
@@ -232,24 +235,26 @@ class _Steps:
         dMq = np.einsum("kbic,b->kic", dMB, qddm)
         A_mot = np.einsum("kic,k->ic", dMq, dq_mean) + 4 * geo["M"] * qddm.sum() * dq_max.sum() ** 2
         A_pos = np.einsum("kic,k->ic", dMq, ebar)
-        # (h + g)(q(t), qd(t)) against (h + g)(qh, vh)
+        # (h + g)(q(t), qd(t)) against (h + g)(qh, vh): first order in q and v (local), the v-quadratic part
+        # exactly (local Christoffel symbols), the q-q and q-v second order with local d/dq of dh/dv and Bernstein
         absJv = np.abs(Jv)
         absG = np.abs(gam)
         mot, pos = self.ev_mot_max, self.ev_pos[j]
         Q_all = np.einsum("abic,a,b->ic", absG, ev_max, ev_max)
         Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
         dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
-        rem = (4 * (geo["gamma"] * float(sp.sum()) ** 2 + geo["g"]) * dqs
-               + 2 * geo["gamma"] * (2 * vs + dvs) * dvs) * dqs
+        rem = (4 * (geo["gamma"] * float(sp.sum()) ** 2 + geo["g"]) * dqs * dqs
+               + np.einsum("kaic,k,a->ic", dJvB, dq_max, ev_max) + 2 * geo["gamma"] * dvs * dvs * dqs)
         H_mot = (np.einsum("kic,k->ic", JqB, dq_mean) + np.einsum("aic,a->ic", absJv, self.ev_mot_mean) + Q_mm + rem)
-        H_pos = np.einsum("kic,k->ic", JqB, ebar) + np.einsum("aic,a->ic", absJv, pos) + (Q_all - Q_mm)
+        # the speed estimate's measurement error enters through the row's exact gradient (window loop, "Jv")
+        H_pos = np.einsum("kic,k->ic", JqB, ebar) + (Q_all - Q_mm)
         # |M(true mid) - M(qh)| per column b
         dlt = np.einsum("kbic,k->bic", dMB, ebar) + 2 * geo["M"] * float(ebar.sum()) ** 2
         out = {"g0": g0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "H_pos": H_pos,
                "Cmax": dlt.max(axis=0),
                "Dloc": np.einsum("bic,b->ic", dlt, np.abs(self.dq[j]) + self.e[j] + self.e[j + 1]),
                "Ecur": np.einsum("bic,b->ic", np.abs(Mc), self.e[j]),
-               "mag": np.abs(g0)}
+               "mag": np.abs(g0), "Jv": Jv}
         # sample j (between steps j-1 and j)
         prev = self.cache.get(j - 1)
         if prev is None and with_prev and j - 1 >= self.m - 1:
@@ -366,6 +371,13 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
             # measurement through the exact gradient of sum_j k'_j M_j dq_j (sample jj of the window)
             part["gradient_position"] += (dkp[jj] * (d["Ecur"] if jj == 0 else d["Eknot"])
                                           + (abs(kp[jj]) * d["Ediff"] if jj else 0.0))
+        # h at the measured speed estimate: sum_j K1_j Jv_j (delta_{j+m} - delta_{j+1-m}) / S, summed by parts
+        Wt = K1[:, None, None, None] * np.stack([st_.get(s + jj)["Jv"] for jj in range(L)])  # (L, a, i, c)
+        G = np.zeros((L + 2 * m - 1,) + Wt.shape[1:])
+        G[2 * m - 1: 2 * m - 1 + L] += Wt  # sample offset jj + m, stored from offset 1 - m
+        G[:L] -= Wt  # sample offset jj + 1 - m
+        eo = e[s + 1 - m: s + L + m]  # (L + 2m - 1, a)
+        part["coriolis_position"] += np.einsum("oaic,oa->ic", np.abs(G), eo) / st_.S
         d_end = st_.get(s + L)  # sample s + L: the last boundary term |k'_{L-1}| |M_{L-1}| e_L
         part["gradient_position"] += dkp[L] * d_end["Eknot"]
         Wi[r], mag[r] = acc, ab
@@ -473,6 +485,37 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
         parts[name] = flat(full)[:, ind]
     return CertifiedEquation(Wc=Wfull[:, ind], D=D, y=y.reshape(-1), bound=bound, joint=joint, window=window,
                              names=tuple(base.names), terms=terms, parts=parts, info=info)
+
+
+def certificate(eq: CertifiedEquation, W_true, y_true, theta_true) -> dict:
+    """The derived radii beside the actual errors (truth known: a simulation), row by row.
+
+    W_true : (m, r) the true rows ``int k Y dt`` (of the true motion); y_true : (m,) ``int k tau_applied dt``;
+    theta_true : (r,) base parameters. Returns JSON-ready: ``rows``, ``entry_violations`` (``|Wc - W_true| >
+    D``), ``torque_violations`` (``|y - y_true| > bound``), ``violations`` (rows with ``|y - Wc theta| > bound +
+    D |theta|``), ``min_margin`` (the smallest ``bound + D |theta| - |y - Wc theta|`` [N m]), ``max_ratio`` (the
+    largest actual error over its radius), per term its max and median row radius at theta and its share of
+    the summed radii (``terms``), and the same for the inertial parts (``parts``).
+    """
+    W_true = np.asarray(W_true, dtype=float)
+    y_true = np.asarray(y_true, dtype=float)
+    th = np.asarray(theta_true, dtype=float)
+    err_W = np.abs(eq.Wc - W_true)
+    err_y = np.abs(eq.y - y_true)
+    res = np.abs(eq.y - eq.Wc @ th)
+    rr = eq.row_radius(np.abs(th))
+    total = rr.pop("total")
+    summed = sum(float(np.sum(v)) for v in rr.values()) or 1.0
+    return {
+        "rows": int(len(eq)), "entry_violations": int(np.sum(err_W > eq.D)),
+        "torque_violations": int(np.sum(err_y > eq.bound)), "violations": int(np.sum(res > total)),
+        "min_margin": float(np.min(total - res)), "max_ratio": float(np.max(res / total)),
+        "actual_max": float(np.max(res)), "radius_median": float(np.median(total)),
+        "terms": {k: {"max": float(np.max(v)), "median": float(np.median(v)), "share": float(np.sum(v)) / summed}
+                  for k, v in rr.items()},
+        "parts": {k: {"max": float(np.max(v @ np.abs(th))), "median": float(np.median(v @ np.abs(th)))}
+                  for k, v in eq.parts.items()},
+    }
 
 
 # ---------------------------------------------------------------------------------------------- spec check
