@@ -222,6 +222,8 @@ def run(
                                           "every registered one; h4bench estimators lists them), replacing the "
                                           "spec's [estimators] methods"),
     runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
+    error_model: str = typer.Option("tuned", help="tuned (the spec's bound) or derived (enclosure: add the "
+                                    "certified box from the [error_model] table and check its certificate)"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
     from h4bench.scenarios.campaign import CampaignInterrupted
@@ -232,7 +234,7 @@ def run(
         with _Progress(enabled=not as_json and sys.stderr.isatty()) as progress:
             result = run_scenario(name, seed=seed, model=model, out=out, quick=quick, progress=progress,
                                   scheduler=scheduler, workers=workers, only=only, fresh=fresh,
-                                  methods=methods, runs=runs)
+                                  methods=methods, runs=runs, error_model=error_model)
     except CampaignInterrupted as exc:
         typer.secho(f"stopped: {exc}", fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130)

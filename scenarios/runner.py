@@ -29,7 +29,8 @@ def check_model(path) -> None:
 def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | None = None,
                  out: str | Path | None = None, quick: bool = False, progress=None,
                  scheduler: str | None = None, workers: int | None = None, only: int | None = None,
-                 fresh: bool = False, methods: str | list | None = None, runs: int | None = None) -> dict:
+                 fresh: bool = False, methods: str | list | None = None, runs: int | None = None,
+                 error_model: str = "tuned") -> dict:
     """Run scenario ``name`` (or a TOML path) and write its folder; returns the result dict.
 
     progress : optional callable(stage, done, total) for a progress display; scheduler, workers : where a
@@ -38,9 +39,18 @@ def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | 
     a campaign, recompute every run instead of resuming; methods : the estimators (``"a,b,c"``, names or
     ``module:attribute``, ``all``: :func:`scenarios.judging.parse_methods`, or a list of those) replacing the
     spec's ``[estimators] methods`` (part of a campaign's provenance: a resumed campaign with other methods
-    recomputes its runs); runs : a campaign's number of runs (``campaign.runs``).
+    recomputes its runs); runs : a campaign's number of runs (``campaign.runs``); error_model : ``"tuned"``
+    (the spec's bound) or ``"derived"`` (the enclosure campaign adds the ``certified`` box and its certificate,
+    :mod:`scenarios.certificate`; the ``certified`` kind always derives it).
     """
     spec = registry.load_spec(name, quick=quick)
+    if error_model not in ("tuned", "derived"):
+        raise ScenarioError(f"error_model must be 'tuned' or 'derived', got {error_model!r}")
+    if error_model == "derived":
+        if spec["kind"] not in ("enclosure", "certified"):
+            raise ScenarioError(f"--error-model derived is available for the kinds enclosure and certified, got "
+                                f"kind {spec['kind']!r}")
+        spec["certified"]["enabled"] = True
     if methods is not None:
         from h4bench.scenarios.judging import parse_methods
 

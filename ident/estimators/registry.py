@@ -4,7 +4,8 @@ An estimator is a callable ``f(W, y, bound, prior, **context) -> ident.Box`` wit
 ``bound`` (N,) > 0 (the error model ``|y - W theta| <= bound`` row by row, in y's units) and ``prior`` a Box with
 finite bounds. Optional context keywords, passed only when the callable's signature accepts them (a named
 parameter or ``**kwargs``): ``groups`` ((N,) ints: which joint/output each row belongs to) and ``instruments``
-((N, p) floats, row-aligned with W). Optional attributes of the callable: ``kind`` (``"guaranteed"``, the default:
+((N, p) floats, row-aligned with W) and ``regressor_radius`` ((N, p) floats >= 0: W is an interval matrix
+``[W - r, W + r]``; the ``certified`` estimator needs it). Optional attributes of the callable: ``kind`` (``"guaranteed"``, the default:
 an outer enclosure of ``{theta in prior : |y - W theta| <= bound}``; or ``"statistical"``: a confidence box),
 ``level`` (a statistical box's confidence level in (0, 1)), ``rigorous`` (True only if every rounding is outward;
 default False for plugins), ``description`` (one line) and ``citation``. Raising
@@ -37,7 +38,7 @@ __all__ = ["BUILTINS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS", "Availa
 
 ENTRY_POINT_GROUP = "h4bench.estimators"
 KINDS = ("guaranteed", "statistical")
-CONTEXT_KEYWORDS = ("groups", "instruments")
+CONTEXT_KEYWORDS = ("groups", "instruments", "regressor_radius")
 
 
 @dataclass(frozen=True)
@@ -214,6 +215,11 @@ def _check_context(context: dict, n: int, p: int) -> dict:
         if z.shape != (n, p):
             raise ValueError(f"instruments must have shape ({n}, {p}) like W, got {z.shape}")
         out["instruments"] = z
+    if out.get("regressor_radius") is not None:
+        d = real_array(out["regressor_radius"], "regressor_radius")
+        if d.shape != (n, p) or not np.all(d >= 0):
+            raise ValueError(f"regressor_radius must have shape ({n}, {p}) like W with entries >= 0, got {d.shape}")
+        out["regressor_radius"] = d
     return out
 
 
@@ -297,3 +303,6 @@ register("wls", "h4bench.ident.estimators.statistical:wls", kind="statistical", 
 register("iv", "h4bench.ident.estimators.statistical:iv", kind="statistical", rigorous=False, level=0.95,
          description="instrumental variables (IDIM-IV), 95 % Bonferroni confidence box (asymptotic)",
          citation="Janot, Vandanjon & Gautier, IEEE TCST 22(1):132-145, 2014")
+register("certified", "h4bench.ident.estimators.uncertain:certified", kind="guaranteed", rigorous=True,
+         description="the Oettli-Prager hull of an interval regressor [W - r, W + r] (context key regressor_radius)",
+         citation="Oettli & Prager, Numer. Math. 6 (1964)")

@@ -42,7 +42,7 @@ from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, interval_hull, strip_b
 from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
 from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
 
-__all__ = ["uncertain_hull"]
+__all__ = ["certified", "uncertain_hull"]
 
 
 # ----------------------------------------------------------------------------------------------- checks
@@ -190,3 +190,21 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     lower, upper = np.clip(res.lower, lo, hi), np.clip(res.upper, lo, hi)
     info["seconds"] = time.perf_counter() - t0
     return Box(lower=lower, upper=upper, names=names, info=info)
+
+
+def certified(W, y, bound, prior, regressor_radius=None) -> Box:
+    """The registry's ``certified`` estimator: :func:`uncertain_hull` on the interval equation
+    ``y in [W - regressor_radius, W + regressor_radius] theta + [-bound, bound]``.
+
+    regressor_radius : (N, p) >= 0, the radius of each regressor entry (e.g. the derived interval equation of
+    :mod:`ident.robots.h4_certified`), passed by the registry as a context keyword; required.
+    """
+    if regressor_radius is None:
+        raise ValueError("certified needs regressor_radius, the (N, p) radius of the interval regressor (a context "
+                         "keyword of ident.estimators.registry.call), got None")
+    return uncertain_hull(W, regressor_radius, y, bound, prior)
+
+
+certified.kind = "guaranteed"
+certified.rigorous = True
+certified.description = "the Oettli-Prager hull of an interval regressor (needs the context key regressor_radius)"

@@ -1,0 +1,276 @@
+"""The weak form of the dynamic equation on sampled data: one kernel on both sides, radii from an ErrorSpec only.
+
+Each processed row applies one kernel ``k(t)`` to both sides of ``tau = W(q, qd, qdd) theta + e``. The kernel
+is supported on ``L`` sample steps ``[t_j0, t_j0+L]``, linear between sample instants (knots at the samples)
+and zero at both ends, so with ``s_w`` its slope on step ``w`` and ``K_w`` its integral over that step:
+
+* torques held over each step (``torque_timing = "hold"``): ``integral k tau = sum_w K_w tau_w`` exactly, and the
+  torque error enters as at most ``torque_error * sum |K_w|``;
+* a column of the form ``dP/dt + F`` with ``P = P(q, qd)``, ``F = F(q, qd)`` (inertial terms in Lagrangian
+  form: ``P = dT/dqd``; the Imot column is ``P = qd_i``, the viscous one ``F = qd_i``) becomes, by parts,
+  ``-integral k' P + integral k F = sum_w (-s_w integral_w P + integral_w k F)``: no acceleration anywhere;
+* on each step ``P`` and ``F`` are evaluated at the secant state ``(q_m, v) = ((q_j + q_j+1) / 2,
+  (q_j+1 - q_j) / h)`` of the measured positions. The TRUE motion on the step differs from the secant line by
+  at most ``|q(t) - q_m| <= qd_max h / 2`` and ``|qd(t) - v| <= qdd_max h / 2``, ``integral_w (qd - v) = 0``
+  exactly and ``|integral_w (q - q_m)| <= qdd_max h^3 / 12`` (the chord remainder), so the truncation radius
+  needs only the stated ``qd_max`` and ``qdd_max`` (no bound on the jerk, which does not exist for held torques);
+* the encoder error enters through the exact gradient of the row functional with respect to the measured
+  positions (for the Imot column: summation by parts, ``sum_u |s_u - s_u-1| e_u``), plus a second-order term.
+
+This module holds the kernel, the row windows and the generic, robot-independent parts (torque side, the
+columns ``qd_i`` of ``P`` or ``F`` and the Coulomb sign columns, the nonlinear-column functional with its
+gradient and remainders); a robot module supplies its configuration-dependent ``P`` and ``F``
+(:mod:`ident.robots.h4_certified`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from h4bench.ident.numerics.interval import dot_error, up
+
+__all__ = ["KERNEL_SHAPES", "Kernel", "RowWindows", "coulomb_columns", "make_kernel", "nonlinear_columns",
+           "imot_columns", "row_windows", "torque_rows", "viscous_columns"]
+
+KERNEL_SHAPES = ("hann", "triangle")
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """A kernel linear between sample instants: ``knots`` (L + 1,) its values at the window's sample instants
+    [1/s] (zero at both ends), ``h`` the sample period [s]."""
+
+    knots: np.ndarray
+    h: float
+
+    @property
+    def steps(self) -> int:
+        return self.knots.size - 1
+
+    @property
+    def integrals(self) -> np.ndarray:
+        """(L,) ``K_w`` = integral of k over step w (trapezoid, exact for a linear piece) [-]."""
+        return 0.5 * self.h * (self.knots[:-1] + self.knots[1:])
+
+    @property
+    def slopes(self) -> np.ndarray:
+        """(L,) ``s_w`` = k' on step w [1/s^2]."""
+        return np.diff(self.knots) / self.h
+
+    @property
+    def mids(self) -> np.ndarray:
+        """(L,) k at the middle of step w [1/s]."""
+        return 0.5 * (self.knots[:-1] + self.knots[1:])
+
+    @property
+    def l1(self) -> float:
+        """Upper bound of ``integral |k|`` (the knots are >= 0, so it is ``sum K_w``, rounded up)."""
+        return float(up(np.sum(self.integrals) * (1 + 4 * self.steps * 2.0**-53)))
+
+
+def make_kernel(steps: int, h: float, shape: str = "hann") -> Kernel:
+    """A kernel of ``steps`` sample steps (``steps + 1`` knots, both ends 0), unit integral.
+
+    shape : ``"hann"`` (``1 - cos(2 pi u / L)``: smooth, its slope's total variation ~ 4 pi / L^2 per unit
+    integral, which scales the encoder radius as ``1 / L^2``) or ``"triangle"`` (a hat).
+    """
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 2:
+        raise ValueError(f"steps must be an integer >= 2 (the kernel's length in sample steps), got {steps!r}")
+    if not (np.isfinite(h) and h > 0):
+        raise ValueError(f"h must be a finite sample period > 0 [s], got {h!r}")
+    if shape not in KERNEL_SHAPES:
+        raise ValueError(f"shape must be one of {KERNEL_SHAPES}, got {shape!r}")
+    u = np.arange(steps + 1) / steps
+    k = 1.0 - np.cos(2 * np.pi * u) if shape == "hann" else 1.0 - np.abs(2 * u - 1)
+    k[0] = k[-1] = 0.0
+    k = k / (h * np.sum(0.5 * (k[:-1] + k[1:])))
+    return Kernel(knots=k, h=float(h))
+
+
+@dataclass(frozen=True)
+class RowWindows:
+    """Row windows on a record of n samples: window r covers samples ``start[r] .. start[r] + L``."""
+
+    start: np.ndarray
+    steps: int
+
+    @property
+    def centre(self) -> np.ndarray:
+        """(R,) the sample each row stands for (the window's middle)."""
+        return self.start + self.steps // 2
+
+    def gather(self, per_step: np.ndarray) -> np.ndarray:
+        """(S, ...) per-step array -> (R, L, ...) the steps of each window."""
+        idx = self.start[:, None] + np.arange(self.steps)[None, :]
+        return per_step[idx]
+
+    def gather_knots(self, per_sample: np.ndarray) -> np.ndarray:
+        """(n, ...) per-sample array -> (R, L + 1, ...) the samples of each window."""
+        idx = self.start[:, None] + np.arange(self.steps + 1)[None, :]
+        return per_sample[idx]
+
+
+def row_windows(n_samples: int, steps: int, stride: int) -> RowWindows:
+    """Windows of ``steps`` steps every ``stride`` samples, all inside the record (no edge trimming needed:
+    the kernel is zero at both ends of its support)."""
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
+    if n_samples < steps + 1:
+        raise ValueError(f"the log must have at least {steps + 1} samples for a kernel of {steps} steps, "
+                         f"got {n_samples}")
+    return RowWindows(start=np.arange(0, n_samples - steps, stride, dtype=np.int64), steps=int(steps))
+
+
+def torque_rows(tau: np.ndarray, windows: RowWindows, kernel: Kernel):
+    """``y`` (R, n_j) = ``sum_w K_w tau_w`` and its floating-point error bound (R, n_j) [N m]."""
+    K = kernel.integrals
+    taus = windows.gather(np.asarray(tau, dtype=float)[:-1])  # held torque of each step
+    y = np.einsum("w,rwj->rj", K, taus)
+    fp = dot_error(np.einsum("w,rwj->rj", np.abs(K), np.abs(taus)), kernel.steps)
+    return y, fp
+
+
+def _secant(q: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    return 0.5 * (q[:-1] + q[1:]), np.diff(q, axis=0) / h
+
+
+def imot_columns(q, e, windows: RowWindows, kernel: Kernel):
+    """The ``P = qd_i`` column of joint i (an Imot-like column): centre ``-sum_w s_w (q_w+1 - q_w)`` (exact in the
+    true positions), measurement radius ``sum_u |s_u - s_u-1| e_u`` (summation by parts), truncation 0.
+
+    q : (n, n_j) measured positions [rad]; e : (n, n_j) position error bounds [rad]. Returns (value, meas,
+    trunc), each (R, n_j) [rad/s^2 integrated against k: rad/s^2]."""
+    s = kernel.slopes
+    dq = windows.gather(np.diff(q, axis=0))
+    value = -np.einsum("w,rwj->rj", s, dq)
+    ds = np.abs(np.diff(np.concatenate([[0.0], s, [0.0]])))  # (L + 1,) |s_u - s_u-1|
+    meas = np.einsum("u,ruj->rj", ds, windows.gather_knots(e))
+    meas = meas + dot_error(np.einsum("w,rwj->rj", np.abs(s), np.abs(dq)), kernel.steps)
+    return value, meas, np.zeros_like(value)
+
+
+def viscous_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max):
+    """The ``F = qd_i`` column: centre ``sum_w K_w v_w`` (v the secant speed), measurement radius
+    ``sum_u |K_u-1 - K_u| e_u / h``, truncation ``sum_w |s_w| qdd_max h^3 / 12`` (k linear on the step:
+    ``integral_w k qd - K_w v = s_w integral (t - t_mid)(qd - qd(t_mid))``). Returns (value, meas, trunc)
+    (R, n_j) [rad/s]."""
+    h = kernel.h
+    K, s = kernel.integrals, kernel.slopes
+    v = windows.gather(np.diff(q, axis=0) / h)
+    value = np.einsum("w,rwj->rj", K, v)
+    dK = np.abs(np.diff(np.concatenate([[0.0], K, [0.0]]))) / h
+    meas = np.einsum("u,ruj->rj", dK, windows.gather_knots(e))
+    meas = meas + dot_error(np.einsum("w,rwj->rj", np.abs(K), np.abs(v)), kernel.steps)
+    trunc = np.broadcast_to(np.sum(np.abs(s)) * h**3 / 12.0 * np.asarray(qdd_max, dtype=float), value.shape)
+    return value, meas, up(np.array(trunc))
+
+
+def coulomb_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max):
+    """The ``F = sign(qd_i)`` column: on a step where the true speed's bound ``|v| - (e_j + e_j+1) / h -
+    qdd_max h / 2 > 0`` excludes 0 the sign is certain (``sign(v)``); elsewhere it is any value in [-1, 1] (the
+    friction of a joint at or through rest), weighted by ``K_w``. Returns (value, radius, uncertain_steps) with
+    value, radius (R, n_j) [-] and uncertain_steps (S, n_j) bool."""
+    h = kernel.h
+    v = np.diff(q, axis=0) / h
+    margin = (e[:-1] + e[1:]) / h + 0.5 * np.asarray(qdd_max, dtype=float) * h
+    certain = np.abs(v) > up(margin)
+    sign = np.where(certain, np.sign(v), 0.0)
+    K = kernel.integrals
+    value = np.einsum("w,rwj->rj", K, windows.gather(sign))
+    radius = np.einsum("w,rwj->rj", np.abs(K), windows.gather((~certain).astype(float)))
+    radius = up(radius + dot_error(np.full_like(radius, np.sum(np.abs(K))), kernel.steps))
+    return value, radius, ~certain
+
+
+def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_max, qdd_max, curvature,
+                      fd_step: tuple[float, float] = (1e-6, 1e-3), chunk: int = 512):
+    """Columns ``dP/dt + F`` with configuration-dependent ``P(q, qd)``, ``F(q, qd)`` (n_out outputs, nc columns).
+
+    evaluate : ``f(q_m (S, n_j), v (S, n_j)) -> (P, F)``, each (S, n_out, nc), vectorised over steps.
+    q, e : (n, n_j) measured positions and their error bounds [rad]; qd_max, qdd_max (n_j,) stated motion bounds;
+    curvature : (MP, MF), each (n_out, nc, 2 n_j, 2 n_j) or per step (S, n_out, nc, 2 n_j, 2 n_j), bounds of ``|d^2 P / dx_a dx_b|``, ``|d^2 F / ...|`` over
+    ``x = (q, qd)`` near the motion (see :func:`ident.robots.h4_certified.curvature_bounds`: sampled, NOT proven).
+    fd_step : central-difference steps in q [rad] and v [rad/s] for the gradient (v: exact for P linear and F
+    quadratic in qd).
+
+    Returns (value, meas, trunc, second), each (R, n_out, nc): the centre; the first-order encoder radius
+    ``sum_u |dPhi / dq_u| e_u`` (the exact gradient of the row functional, to differencing error); the
+    truncation radius (chord remainder, linear terms exactly integrated, second-order remainder over the step's
+    motion box); the encoder's second-order term. ``second`` and the second-order part of ``trunc`` rest on
+    ``curvature``.
+    """
+    h = kernel.h
+    qm, v = _secant(q, h)
+    S, nj = qm.shape
+    P, F = evaluate(qm, v)
+    n_out, nc = P.shape[1:]
+    Pq, Pv, Fq, Fv = (np.empty(P.shape + (nj,)) for _ in range(4))
+    dq, dv = fd_step
+    for a in range(nj):
+        for arr_p, arr_f, step, which in ((Pq, Fq, dq, 0), (Pv, Fv, dv, 1)):
+            d = np.zeros((S, nj))
+            d[:, a] = step
+            args_p = (qm + d, v) if which == 0 else (qm, v + d)
+            args_m = (qm - d, v) if which == 0 else (qm, v - d)
+            p1, f1 = evaluate(*args_p)
+            p0, f0 = evaluate(*args_m)
+            arr_p[..., a] = (p1 - p0) / (2 * step)
+            arr_f[..., a] = (f1 - f0) / (2 * step)
+    MP, MF = (np.broadcast_to(np.asarray(m, dtype=float), (S, n_out, nc, 2 * nj, 2 * nj)) for m in curvature)
+    qdd_max = np.asarray(qdd_max, dtype=float)
+    # gradients at the measured secant state, widened to cover the true one (|q_m error| <= e_m, |v error| <= e_v)
+    em, ev = 0.5 * (e[:-1] + e[1:]), (e[:-1] + e[1:]) / h
+    eps = np.concatenate([em, ev], axis=1)  # (S, 2 n_j)
+    # the true speed on each step: |qd| <= |v_measured| + e_v + qdd_max h / 2, and never above the stated qd_max
+    qd_step = np.minimum(np.abs(v) + ev + qdd_max * h / 2, np.asarray(qd_max, dtype=float))  # (S, n_j)
+    # second-order remainder of one step, |R(t)| <= 1/2 sum_ab M_ab |dx_a(t)| |dx_b(t)| with dx = x(t) - x_m:
+    # |dq_a| <= qd_a h / 2 everywhere; sigma_a = qd_a - v_a has zero mean on the step and |sigma_a'| <= qdd_max,
+    # so (Poincare-Wirtinger, constant (h / pi)^2) integral sigma_a^2 <= (qdd_max h / pi)^2 h and, by
+    # Cauchy-Schwarz, integral |sigma_a sigma_b| <= qdd_a qdd_b h^3 / pi^2 and integral |dq_a sigma_b| <=
+    # (qd_a h / 2) (qdd_b h / pi) h: the integral of |R| over the step is <= h * Q_int; its supremum is Q_sup.
+    d_int = np.concatenate([qd_step * h / 2, np.broadcast_to(qdd_max * h / np.pi, (S, nj))], axis=1)
+    d_sup = np.concatenate([qd_step * h / 2, np.broadcast_to(qdd_max * h / 2, (S, nj))], axis=1)
+    QP = 0.5 * np.einsum("sicab,sa,sb->sic", MP, d_int, d_int)  # (S, n_out, nc)
+    QF = 0.5 * np.einsum("sicab,sa,sb->sic", MF, d_int, d_int)
+    QF_sup = 0.5 * np.einsum("sicab,sa,sb->sic", MF, d_sup, d_sup)
+    gP = np.einsum("sicab,sb->sica", MP, eps)  # (S, n_out, nc, 2 n_j)
+    gF = np.einsum("sicab,sb->sica", MF, eps)
+    aPq = np.abs(Pq) + gP[..., :nj]
+    aFq = np.abs(Fq) + gF[..., :nj]
+    aFv = np.abs(Fv) + gF[..., nj:]
+    # per-step truncation pieces (S, n_out, nc): coefficient of |s_w| and of |k_mid,w|
+    t_s = (np.einsum("sica,a->sic", aPq, qdd_max) * h**3 / 12 + h * QP
+           + np.einsum("sica,sa->sic", aFq, qd_step) * h**3 / 12 + np.einsum("sica,a->sic", aFq, qdd_max) * h**4 / 32
+           + np.einsum("sica,a->sic", aFv, qdd_max) * h**3 / 8 + QF_sup * h**2 / 4)
+    t_k = np.einsum("sica,a->sic", aFq, qdd_max) * h**3 / 12 + h * QF
+    # encoder second-order: 1/2 eps^T M eps per step
+    s2P = 0.5 * np.einsum("sicab,sa,sb->sic", MP, eps, eps)
+    s2F = 0.5 * np.einsum("sicab,sa,sb->sic", MF, eps, eps)
+    s, K, km = kernel.slopes, kernel.integrals, kernel.mids
+    # derivative of step j's term with respect to q_j (A) and q_j+1 (B), per unit weight
+    dPa, dPb = 0.5 * Pq - Pv / h, 0.5 * Pq + Pv / h
+    dFa, dFb = 0.5 * Fq - Fv / h, 0.5 * Fq + Fv / h
+    R = windows.start.size
+    L = kernel.steps
+    value = np.empty((R, n_out, nc))
+    meas, trunc, second = np.empty_like(value), np.empty_like(value), np.empty_like(value)
+    for r0 in range(0, R, chunk):
+        sub = RowWindows(windows.start[r0:r0 + chunk], L)
+        gPw, gFw = sub.gather(P), sub.gather(F)
+        value[r0:r0 + chunk] = -h * np.einsum("w,rwic->ric", s, gPw) + np.einsum("w,rwic->ric", K, gFw)
+        fp = dot_error(h * np.einsum("w,rwic->ric", np.abs(s), np.abs(gPw))
+                       + np.einsum("w,rwic->ric", np.abs(K), np.abs(gFw)), 2 * L)
+        A = -h * np.einsum("w,rwica->rwica", s, sub.gather(dPa)) + np.einsum("w,rwica->rwica", K, sub.gather(dFa))
+        B = -h * np.einsum("w,rwica->rwica", s, sub.gather(dPb)) + np.einsum("w,rwica->rwica", K, sub.gather(dFb))
+        grad = np.zeros((A.shape[0], L + 1) + A.shape[2:])
+        grad[:, :L] += A
+        grad[:, 1:] += B
+        ew = sub.gather_knots(e)  # (r, L + 1, n_j)
+        meas[r0:r0 + chunk] = up(np.einsum("ruica,rua->ric", np.abs(grad), ew) + fp)
+        trunc[r0:r0 + chunk] = (np.einsum("w,rwic->ric", np.abs(s), sub.gather(t_s))
+                                + np.einsum("w,rwic->ric", np.abs(km), sub.gather(t_k)))
+        second[r0:r0 + chunk] = (h * np.einsum("w,rwic->ric", np.abs(s), sub.gather(s2P))
+                                 + np.einsum("w,rwic->ric", np.abs(K), sub.gather(s2F)))
+    return value, meas, up(trunc), up(second)

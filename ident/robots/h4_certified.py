@@ -1,0 +1,196 @@
+"""The H4's derived interval equation: every radius from an :class:`~ident.processing.errorspec.ErrorSpec`.
+
+The weak form of :mod:`ident.processing.weakform` applied to the H4 model of :mod:`ident.robots.h4`:
+
+* ``Imot_i``: ``P = qd_i`` (exact in the true positions; encoder by summation by parts);
+* ``Mnac``, ``Ibc``: the nacelle's Lagrangian per unit parameter, ``T = 1/2 |J_c qd|^2`` (``J_c`` the rows x, y, z
+  of J for Mnac, the row theta for Ibc) and ``V = -g . x`` (Mnac only), so that
+  ``J_c^T (J_c qdd + Jd_c qd) - [Mnac] J_p^T g = d/dt (dT/dqd) - dT/dq + dV/dq`` with
+  ``P = dT/dqd = J_c^T J_c qd`` and ``F = -Jd_c^T J_c qd - [Mnac] J_p^T g`` (``dT/dq = Jd^T J qd`` because
+  ``d(J qd)/dq = Jd`` for a holonomic x(q)): functions of (q, qd) only;
+* ``Fv_i``: ``F = qd_i``; ``Fs_i``: ``F = sign(qd_i)``, certain or the interval [-1, 1] step by step.
+
+What is proven and what is not (``CertifiedEquation.info["not_proven"]``): the torque side, the Imot, Fv and Fs
+columns and the first-order terms of Mnac and Ibc are bounded from the ErrorSpec alone. The second-order
+remainders of the Mnac and Ibc columns (the variation of J(q), Jd(q, qd) within one sample step, and the
+encoder's second-order effect) rest on bounds of the second derivatives of P and F that are SAMPLED (central
+differences at a subsample of the measured steps, maximum times :data:`CURVATURE_FACTOR`), not proven by
+interval evaluation; the gradients of P and F are central differences (error of order step^2). Their share of
+the radius is reported (``terms``), so that what rests on them is visible.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from h4bench.ident.processing.errorspec import ErrorSpec
+from h4bench.ident.processing.weakform import (coulomb_columns, imot_columns, make_kernel, nonlinear_columns,
+                                               row_windows, torque_rows, viscous_columns)
+from h4bench.ident.robots.h4 import PARAMETER_NAMES
+
+__all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "Processing", "certified_equation", "curvature_bounds",
+           "nacelle_terms"]
+
+CURVATURE_FACTOR = 2.0  # stated factor on the sampled second-derivative maxima (not proven; see module docstring)
+N_JOINTS = 4
+
+
+@dataclass(frozen=True)
+class Processing:
+    """The weak form's processing settings (a scenario's ``[certified]`` table): kernel length in sample steps,
+    its shape, the stride between rows [samples] and the sampling of the curvature bounds [steps]."""
+
+    kernel_steps: int = 100
+    kernel_shape: str = "hann"
+    stride: int = 2
+    curvature_every: int = 10
+
+
+@dataclass(frozen=True)
+class CertifiedEquation:
+    """``y in [Wc - D, Wc + D] theta + [-bound, bound]`` row by row (rows ``4 r + i``: window r, joint i).
+
+    Wc, D (m, 14); y, bound (m,) [N m]; sample (m,) the centre sample of each row's window; joint (m,);
+    terms: the radii by origin, ``torque``, ``model``, ``rounding`` (m,) [N m] and ``measurement``,
+    ``second_order``, ``truncation``, ``sign`` (m, 14) (units of W); D is the sum of the four matrices, bound
+    the sum of the three vectors."""
+
+    Wc: np.ndarray
+    D: np.ndarray
+    y: np.ndarray
+    bound: np.ndarray
+    sample: np.ndarray
+    joint: np.ndarray
+    names: tuple
+    terms: dict
+    info: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return self.y.size
+
+
+def nacelle_terms(geometry, q, qd):
+    """P, F (S, 4, 2) of the Mnac and Ibc columns at states q, qd (S, 4) (module docstring)."""
+    from h4bench.sim.kinematics import _jacobian_dot, _jacobians, forward_kinematics  # noqa: PLC0415
+
+    x = np.atleast_2d(forward_kinematics(geometry, q))
+    jac = _jacobians(geometry, q, x)
+    jd = _jacobian_dot(geometry, jac, qd)
+    J = jac.J
+    xd = np.einsum("sab,sb->sa", J, qd)
+    P = np.empty(q.shape + (2,))
+    F = np.empty_like(P)
+    P[..., 0] = np.einsum("sai,sa->si", J[:, :3, :], xd[:, :3])
+    P[..., 1] = J[:, 3, :] * xd[:, 3, None]
+    F[..., 0] = -np.einsum("sai,sa->si", jd[:, :3, :], xd[:, :3]) - np.einsum("sai,a->si", J[:, :3, :],
+                                                                             geometry.gravity)
+    F[..., 1] = -jd[:, 3, :] * xd[:, 3, None]
+    return P, F
+
+
+def curvature_bounds(geometry, q, h: float, every: int = 10, factor: float = CURVATURE_FACTOR,
+                     steps: tuple[float, float] = (1e-3, 0.5)):
+    """Sampled bounds (MP, MF), each (S, 4, 2, 8, 8) per step, of ``|d^2 P / dx_a dx_b|``, ``|d^2 F / ...|`` over
+    ``x = (q, qd)``: central second differences at every ``every``-th secant state of the measured positions
+    q (n, 4); each step takes the maximum over the sampled states within two sampling intervals of it, times
+    ``factor``. NOT a proof (module docstring)."""
+    S = q.shape[0] - 1
+    idx = np.unique(np.append(np.arange(0, S, every), S - 1))
+    qm = 0.5 * (q[:-1] + q[1:])[idx]
+    v = (np.diff(q, axis=0) / h)[idx]
+    x0 = np.concatenate([qm, v], axis=1)
+    d = np.concatenate([np.full(4, steps[0]), np.full(4, steps[1])])
+
+    def ev(x):
+        return nacelle_terms(geometry, x[:, :4], x[:, 4:])
+
+    MP = np.zeros((idx.size, 4, 2, 8, 8))
+    MF = np.zeros_like(MP)
+    base = ev(x0)
+    for a in range(8):
+        for b in range(a, 8):
+            ea, eb = np.zeros(8), np.zeros(8)
+            ea[a], eb[b] = d[a], d[b]
+            if a == b:
+                p1, p0 = ev(x0 + ea), ev(x0 - ea)
+                hp = [(u1 - 2 * u + u0) / d[a] ** 2 for u1, u, u0 in zip(p1, base, p0)]
+            else:
+                pp, pm, mp, mm = ev(x0 + ea + eb), ev(x0 + ea - eb), ev(x0 - ea + eb), ev(x0 - ea - eb)
+                hp = [(a1 - a2 - a3 + a4) / (4 * d[a] * d[b]) for a1, a2, a3, a4 in zip(pp, pm, mp, mm)]
+            for M, hv in zip((MP, MF), hp):
+                M[..., a, b] = M[..., b, a] = np.abs(hv)
+    # per step: the maximum over the sampled states within 2 sampling intervals
+    near = np.clip(np.searchsorted(idx, np.arange(S))[:, None] + np.arange(-2, 3)[None, :], 0, idx.size - 1)
+    return factor * MP[near].max(axis=1), factor * MF[near].max(axis=1)
+
+
+def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing | None = None,
+                       position_error=None) -> CertifiedEquation:
+    """The H4's derived interval equation of a log: q (n, 4) measured positions [rad], tau (n, 4) logged torques
+    [N m] held over each step, spec the error specification (4 joints, ``torque_timing = "hold"``).
+
+    position_error : (n, 4) bounds of the position error [rad]; default ``spec.position_error(q)`` (0 gives the
+    equation of exact positions, used by the certificate to check the truncation terms alone).
+    """
+    processing = processing or Processing()
+    q = np.asarray(q, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    if q.ndim != 2 or q.shape[1] != N_JOINTS or tau.shape != q.shape:
+        raise ValueError(f"q and tau must have the same shape (n, {N_JOINTS}), got {q.shape} and {tau.shape}")
+    if spec.n_joints != N_JOINTS:
+        raise ValueError(f"spec must describe {N_JOINTS} joints (the H4), got n_joints = {spec.n_joints}")
+    if spec.torque_timing != "hold":
+        raise ValueError(f"spec.torque_timing must be 'hold' for the weak form (torques held over each step), got "
+                         f"{spec.torque_timing!r}")
+    if spec.latency > 0 and spec.torque_rate is None:
+        raise ValueError("spec.latency > 0 needs spec.torque_rate (the bound on |d tau / dt|)")
+    h = spec.sample_period
+    e = spec.position_error(q) if position_error is None else np.broadcast_to(
+        np.asarray(position_error, dtype=float), q.shape)
+    kernel = make_kernel(processing.kernel_steps, h, processing.kernel_shape)
+    windows = row_windows(q.shape[0], processing.kernel_steps, processing.stride)
+    R = windows.start.size
+    p = len(PARAMETER_NAMES)
+    cols = {name: np.zeros((R, N_JOINTS, p)) for name in ("value", "measurement", "truncation", "second_order",
+                                                          "sign")}
+    joint = np.arange(N_JOINTS)
+    for offset, fn in ((0, imot_columns), (6, viscous_columns), (10, coulomb_columns)):
+        args = (q, e, windows, kernel) + (() if fn is imot_columns else (spec.qdd_max,))
+        value, r1, r2 = fn(*args)
+        cols["value"][:, joint, offset + joint] = value
+        if fn is coulomb_columns:
+            cols["sign"][:, joint, offset + joint] = r1
+            sign_uncertain = r2
+        else:
+            cols["measurement"][:, joint, offset + joint] = r1
+            cols["truncation"][:, joint, offset + joint] = r2
+    curv = curvature_bounds(geometry, q, h, every=processing.curvature_every)
+    value, meas, trunc, second = nonlinear_columns(lambda a, b: nacelle_terms(geometry, a, b), q, e, windows,
+                                                   kernel, spec.qd_max, spec.qdd_max, curv)
+    cols["value"][..., 4:6] = value
+    cols["measurement"][..., 4:6] = meas
+    cols["truncation"][..., 4:6] = trunc
+    cols["second_order"][..., 4:6] = second
+    y, fp = torque_rows(tau, windows, kernel)
+    l1 = kernel.l1
+    model = np.asarray(spec.model_error, dtype=float) * np.ones(N_JOINTS)
+    lat = spec.latency * (np.zeros(N_JOINTS) if spec.torque_rate is None else spec.torque_rate)
+    terms_b = {"torque": np.broadcast_to(spec.torque_error * l1, (R, N_JOINTS)),
+               "model": np.broadcast_to((model + lat) * l1, (R, N_JOINTS)), "rounding": fp}
+    m = R * N_JOINTS
+    terms = {k: np.ascontiguousarray(v).reshape(m) for k, v in terms_b.items()}
+    terms.update({k: cols[k].reshape(m, p) for k in ("measurement", "truncation", "second_order", "sign")})
+    D = terms["measurement"] + terms["truncation"] + terms["second_order"] + terms["sign"]
+    bound = terms["torque"] + terms["model"] + terms["rounding"]
+    info = {"kernel_steps": processing.kernel_steps, "kernel_shape": processing.kernel_shape,
+            "stride": processing.stride, "kernel_l1": l1, "rows": m, "windows": R,
+            "sign_uncertain_steps": int(sign_uncertain.sum()), "steps": int(q.shape[0] - 1),
+            "curvature_factor": CURVATURE_FACTOR, "curvature_every": processing.curvature_every,
+            "not_proven": ["second_order (Mnac, Ibc): sampled second-derivative bounds x "
+                           f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds",
+                           "gradients of the Mnac, Ibc per-step functions by central differences"]}
+    return CertifiedEquation(Wc=cols["value"].reshape(m, p), D=D, y=y.reshape(m), bound=bound,
+                             sample=np.repeat(windows.centre, N_JOINTS), joint=np.tile(joint, R),
+                             names=PARAMETER_NAMES, terms=terms, info=info)

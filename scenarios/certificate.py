@@ -1,0 +1,142 @@
+"""The certified box of a simulated run (:func:`certify`, the simulated robot's ErrorSpec) and its certificate,
+checked row by row against the run's ground truth.
+
+The certificate of a derived interval equation, checked row by row against a simulation's ground truth.
+
+The truth (exact sampled positions, applied torques, true parameters) is read here only to check, never by an
+estimator. Per processed row and term, the derived radius beside the actual error:
+
+* ``torque``: ``sum_w K_w (tau_applied - tau_logged)`` against ``torque_error * integral |k|``;
+* ``measurement``: each column's centre from the measured positions minus the same functional of the true
+  sampled positions, against the column's measurement + second-order radius (Imot, Mnac, Ibc, Fv columns;
+  the Coulomb columns are checked in ``motion`` and ``total``);
+* ``motion``: the weak-form equation of the TRUE positions and applied torques, ``|y - Wc theta|``, against its
+  truncation + sign radii at the true parameters plus the model bound (what the stated qd_max, qdd_max and the
+  model bound must cover);
+* ``total``: ``|y - Wc theta_true| <= bound + D theta_true`` on the equation the estimator saw.
+
+``violations`` counts every failed check (all terms); ``min_margin`` is the smallest ``radius - |actual|`` of
+the total check [N m]; ``terms`` each term's largest radius at the true parameters [N m] and ``shares`` its mean
+share of the row radius.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from h4bench.ident.processing.errorspec import ErrorSpec
+from h4bench.ident.robots.h4_certified import Processing, certified_equation
+from h4bench.scenarios import judging
+from h4bench.scenarios.spec import ScenarioError
+
+__all__ = ["certify", "check_certificate", "processing_of", "simulated_error_spec"]
+
+_COLUMN_CHECKED = slice(0, 10)  # Imot1-4, Mnac, Ibc, Fv1-4
+
+
+def _check(actual, radius) -> dict:
+    actual, radius = np.abs(np.asarray(actual, dtype=float)), np.asarray(radius, dtype=float)
+    margin = radius - actual
+    return {"violations": int(np.sum(margin < 0)), "min_margin": float(margin.min()),
+            "max_actual": float(actual.max()), "max_radius": float(radius.max()),
+            "max_actual_over_radius": float(np.max(actual / np.maximum(radius, 1e-300)))}
+
+
+def check_certificate(geometry, ceq, truth, tau_logged, error_spec, processing, theta_true) -> dict:
+    """The certificate entry of ``result.json`` (module docstring).
+
+    ceq : the :class:`~ident.robots.h4_certified.CertifiedEquation` of the measured log; truth : the run's
+    ``sim.GroundTruth``; tau_logged (n, 4) [N m]; error_spec, processing : what ``ceq`` was built with.
+    """
+    th = np.asarray(theta_true, dtype=float)
+    exact = certified_equation(geometry, truth.q, truth.tau_applied, error_spec, processing, position_error=0.0)
+    t = ceq.terms
+    checks = {
+        "torque": _check(exact.y - ceq.y, t["torque"]),
+        "measurement": _check((ceq.Wc - exact.Wc)[:, _COLUMN_CHECKED],
+                              (t["measurement"] + t["second_order"])[:, _COLUMN_CHECKED]),
+        "motion": _check(exact.y - exact.Wc @ th, (exact.terms["truncation"] + exact.terms["sign"]) @ th
+                         + exact.terms["model"] + exact.terms["rounding"]),
+        "total": _check(ceq.y - ceq.Wc @ th, ceq.bound + ceq.D @ th),
+    }
+    radii = {"torque": t["torque"], "model": t["model"], "rounding": t["rounding"],
+             **{k: t[k] @ th for k in ("measurement", "second_order", "truncation", "sign")}}
+    total = sum(radii.values())
+    qd_true, qdd_true = np.abs(truth.qd).max(axis=0), np.abs(truth.qdd).max(axis=0)
+    motion_held = bool(np.all(qd_true <= error_spec.qd_max) and np.all(qdd_true <= error_spec.qdd_max))
+    return {
+        "rows": len(ceq), "violations": int(sum(c["violations"] for c in checks.values()) + (not motion_held)),
+        "min_margin": checks["total"]["min_margin"], "checks": checks,
+        "terms": {k: float(np.max(v)) for k, v in radii.items()},
+        "shares": {k: float(np.mean(v / total)) for k, v in radii.items()},
+        "motion_bounds": {"qd_max": error_spec.qd_max.tolist(), "qd_true_max": qd_true.tolist(),
+                          "qdd_max": error_spec.qdd_max.tolist(), "qdd_true_max": qdd_true.tolist(),
+                          "held": motion_held},
+        "equation": dict(ceq.info),
+    }
+
+
+def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float) -> ErrorSpec:
+    """The simulated robot's ErrorSpec: its sensor facts from the simulator's settings, its motion bounds stated
+    from the reference (see the module docstring); ``sources`` says which is which."""
+    em = spec["error_model"]
+    counts = int(em["counts_per_turn"]) or int(spec["encoder"]["counts_per_turn"])
+    if counts < 1:
+        raise ScenarioError("error_model.counts_per_turn (or encoder.counts_per_turn) must be >= 1: the derived "
+                            f"error model needs a position resolution, got {counts}")
+    for key in ("motion_margin_qd", "motion_margin_qdd"):
+        if not (np.isfinite(em[key]) and em[key] >= 1.0):
+            raise ScenarioError(f"error_model.{key} must be a number >= 1 (a tracking margin), got {em[key]!r}")
+    torque = float(em["torque_error"]) or float(noise_bound)
+    qd = float(em["qd_max"]) or em["motion_margin_qd"] * np.abs(np.asarray(reference.qd)).max(axis=0)
+    qdd = float(em["qdd_max"]) or em["motion_margin_qdd"] * np.abs(np.asarray(reference.qdd)).max(axis=0)
+    sources = {
+        "position_resolution": f"the simulator's encoder: {counts} counts per turn, rounded to the nearest count",
+        "sample_period": "the simulator's sample period (torques held over each step)",
+        "torque_error": ("stated in error_model.torque_error" if em["torque_error"] else
+                         "the injected torque error's rigorous bound (noise.bound)"),
+        "qd_max": (f"stated: {em['motion_margin_qd']:g} x the reference trajectory's peak |qd| per joint (tracking "
+                   "margin), checked against the truth" if not em["qd_max"] else "stated in error_model.qd_max"),
+        "qdd_max": (f"stated: {em['motion_margin_qdd']:g} x the reference trajectory's peak |qdd| per joint "
+                    "(tracking margin), checked against the truth" if not em["qdd_max"] else
+                    "stated in error_model.qdd_max"),
+        "model_error": "stated in error_model.model_error",
+    }
+    return ErrorSpec(n_joints=4, sample_period=float(dt), position_resolution=2 * np.pi / counts,
+                     position_rounding="nearest", torque_timing="hold", torque_error=torque, qd_max=qd, qdd_max=qdd,
+                     model_error=float(em["model_error"]), sources=sources)
+
+
+def processing_of(spec: dict) -> Processing:
+    c = spec["certified"]
+    return Processing(kernel_steps=int(c["kernel_steps"]), kernel_shape=str(c["kernel_shape"]),
+                      stride=int(c["stride"]), curvature_every=int(c["curvature_every"]))
+
+
+def certify(run_, spec: dict) -> dict:
+    """The certified box of an experiment run, judged, with its certificate; adds ``certified`` to the run's
+    boxes and returns the extra result keys (``certificate``, ``error_model``, ``width_vs_tuned_geomean``,
+    ``methods.certified``)."""
+    error_spec = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
+    processing = processing_of(spec)
+    t0 = time.perf_counter()
+    ceq = certified_equation(run_.geometry, run_.dataset.q, run_.dataset.tau, error_spec, processing)
+    t_eq = time.perf_counter() - t0
+    outcomes, _ = judging.run_methods(["certified"], ceq.Wc, ceq.y, ceq.bound, run_.prior,
+                                      {"regressor_radius": ceq.D, "groups": ceq.joint.astype(np.int64)})
+    entry = judging.judge(outcomes, None, run_.theta_true, list(ceq.names))["certified"]
+    entry["equation_seconds"] = t_eq
+    t0 = time.perf_counter()
+    cert = check_certificate(run_.geometry, ceq, run_.truth, run_.dataset.tau, error_spec, processing,
+                             run_.theta_true)
+    cert["seconds"] = time.perf_counter() - t0
+    out = {"certificate": cert, "error_model": error_spec.to_dict(), "certified_entry": entry,
+           "width_vs_tuned_geomean": None, "width_vs_tuned": None}
+    tuned = run_.boxes.get("hull")
+    if entry["status"] == "ok" and tuned is not None:
+        ratio = np.asarray(entry["width"]) / np.maximum(tuned.width, 1e-300)
+        out["width_vs_tuned"] = ratio.tolist()
+        out["width_vs_tuned_geomean"] = float(np.exp(np.mean(np.log(ratio))))
+    return out

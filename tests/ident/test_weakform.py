@@ -1,0 +1,111 @@
+"""The weak form's identities against independent oracles (scipy quadrature, the H4 regressor)."""
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from h4bench import ident, sim
+from h4bench.ident.processing.weakform import (imot_columns, make_kernel, row_windows, torque_rows,
+                                               viscous_columns)
+from h4bench.ident.robots.h4_certified import nacelle_terms
+
+H = 1e-3
+A, W0 = np.array([0.3, -0.2, 0.25, 0.1]), np.array([2.0, 3.1, 4.3, 5.2])  # q(t) = A sin(W0 t) [rad]
+
+
+def motion(t):
+    t = np.asarray(t, dtype=float)[..., None]
+    return A * np.sin(W0 * t), A * W0 * np.cos(W0 * t), -A * W0**2 * np.sin(W0 * t)
+
+
+def k_of(kernel, t0):
+    return lambda t: np.interp(t, t0 + H * np.arange(kernel.knots.size), kernel.knots)
+
+
+def test_kernel_has_unit_integral_and_zero_ends():
+    for shape in ("hann", "triangle"):
+        k = make_kernel(50, H, shape)
+        assert k.knots[0] == k.knots[-1] == 0.0
+        assert np.sum(k.integrals) == pytest.approx(1.0, rel=1e-14)
+        assert quad(k_of(k, 0.0), 0, 50 * H, limit=200, points=H * np.arange(51))[0] == pytest.approx(1.0, rel=1e-9)
+    with pytest.raises(ValueError, match="steps must be an integer >= 2"):
+        make_kernel(1, H)
+    with pytest.raises(ValueError, match="shape must be one of"):
+        make_kernel(10, H, "gauss")
+
+
+def test_acceleration_and_speed_columns_match_quadrature():
+    """integral k qdd (quadrature of the analytic motion) = the Imot column from the sampled positions (exact
+    identity); integral k qd within the Fv column's truncation radius."""
+    n, L = 400, 60
+    t = H * np.arange(n)
+    q = motion(t)[0]
+    k = make_kernel(L, H)
+    win = row_windows(n, L, 37)
+    e = np.zeros_like(q)
+    acc, meas, trunc = imot_columns(q, e, win, k)
+    vel, _, vtrunc = viscous_columns(q, e, win, k, np.abs(A) * W0**2)
+    for r, s0 in enumerate(win.start):
+        t0 = t[s0]
+        kf = k_of(k, t0)
+        pts = t0 + H * np.arange(L + 1)
+        for j in range(4):
+            ref_a = quad(lambda s: kf(s) * motion(s)[2][j], t0, t0 + L * H, points=pts, limit=400)[0]
+            ref_v = quad(lambda s: kf(s) * motion(s)[1][j], t0, t0 + L * H, points=pts, limit=400)[0]
+            assert acc[r, j] == pytest.approx(ref_a, abs=1e-8 * np.abs(A[j]) * W0[j] ** 2)
+            assert abs(vel[r, j] - ref_v) <= vtrunc[r, j] + 1e-12
+    assert np.all(trunc == 0) and np.all(meas >= 0)
+
+
+def test_encoder_radius_covers_quantisation():
+    n, L = 600, 80
+    q = motion(H * np.arange(n))[0]
+    res = 2 * np.pi / 2000
+    qm = np.round(q / res) * res
+    k = make_kernel(L, H)
+    win = row_windows(n, L, 5)
+    e = np.full_like(q, res / 2)
+    exact = imot_columns(q, 0 * e, win, k)[0]
+    got, meas, _ = imot_columns(qm, e, win, k)
+    assert np.all(np.abs(got - exact) <= meas)
+    # the bound is attained by the worst-case error pattern e_u = sign(s_u - s_u-1) res / 2 (summation by parts)
+    ds = np.diff(np.concatenate([[0.0], k.slopes, [0.0]]))
+    worst = q.copy()
+    worst[win.start[0]:win.start[0] + L + 1, 0] += np.sign(ds) * res / 2
+    dev = imot_columns(worst, 0 * e, win, k)[0][0, 0] - exact[0, 0]
+    assert abs(dev) == pytest.approx(meas[0, 0], rel=1e-9)
+
+
+def test_torque_side_is_exact_for_held_torques():
+    n, L = 300, 40
+    tau = np.random.default_rng(0).uniform(-2, 2, (n, 4))
+    k = make_kernel(L, H)
+    win = row_windows(n, L, 11)
+    y, fp = torque_rows(tau, win, k)
+    s0 = win.start[3]
+    ref = sum(quad(k_of(k, 0.0), w * H, (w + 1) * H)[0] * tau[s0 + w] for w in range(L))
+    np.testing.assert_allclose(y[3], ref, rtol=1e-10)
+    assert np.all(fp >= 0) and np.all(fp < 1e-12)
+
+
+def test_nacelle_lagrangian_form_matches_the_regressor():
+    """dP/dt + F (time derivative by central differences along a smooth motion) = the regressor's Mnac and Ibc
+    columns (ident.regressor, eq. 19 form)."""
+    geometry = sim.H4Geometry.from_model(sim.load_model(sim.DEFAULT_MODEL_PATH))
+    from h4bench.sim.kinematics import inverse_kinematics
+
+    q0 = inverse_kinematics(geometry, np.array([0.0, 0.0, -0.55, 0.0]))  # home pose (trajectories.limits)
+
+    def path(t):  # a small motion about home
+        q, qd, qdd = motion(t)
+        return q / 3 + q0, qd / 3, qdd / 3
+
+    t = np.linspace(0.1, 0.5, 5)
+    dt = 1e-5
+    q, qd, qdd = path(t)
+    w = ident.regressor(geometry, q, qd, qdd).reshape(-1, 4, 14)[..., 4:6]
+    Pp = nacelle_terms(geometry, *path(t + dt)[:2])[0]
+    Pm = nacelle_terms(geometry, *path(t - dt)[:2])[0]
+    F = nacelle_terms(geometry, q, qd)[1]
+    strong = (Pp - Pm) / (2 * dt) + F
+    np.testing.assert_allclose(strong, w, rtol=1e-6, atol=1e-7 * np.abs(w).max())

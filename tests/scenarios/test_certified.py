@@ -1,0 +1,81 @@
+"""The certified path on a simulated run: the certificate holds, and it can fail (a spec that understates the
+motion or the encoder error is caught by the truth); no allowance is read."""
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+from h4bench.ident.robots.h4_certified import certified_equation
+from h4bench.scenarios.certificate import certify, check_certificate, processing_of, simulated_error_spec
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.registry import load_spec
+
+
+@pytest.fixture(scope="module")
+def run_and_spec():
+    spec = load_spec("certified", quick=True)
+    return run_experiment(spec, 0, estimate=False), spec
+
+
+def _short(run_, spec, n=1500, **change):
+    """The certificate on the first n samples with ErrorSpec fields changed."""
+    es = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
+    es = dataclasses.replace(es, **change)
+    proc = dataclasses.replace(processing_of(spec), curvature_every=20)
+    truth = copy.copy(run_.truth)
+    for f in ("q", "qd", "qdd", "tau_applied"):
+        setattr(truth, f, getattr(run_.truth, f)[:n])
+    ceq = certified_equation(run_.geometry, run_.dataset.q[:n], run_.dataset.tau[:n], es, proc)
+    return check_certificate(run_.geometry, ceq, truth, run_.dataset.tau[:n], es, proc, run_.theta_true)
+
+
+def test_certified_box_encloses_and_the_certificate_holds_without_an_allowance(run_and_spec):
+    run_, spec = run_and_spec
+    spec = copy.deepcopy(spec)
+    del spec["bound"]  # the certified path must not read the tuned allowance
+    run_.bound_raw = float("nan")
+    out = certify(run_, spec)
+    cert, entry = out["certificate"], out["certified_entry"]
+    assert cert["rows"] > 0 and cert["violations"] == 0 and cert["min_margin"] >= 0
+    assert entry["status"] == "ok" and entry["all_enclosed"]
+    assert "allowance" not in out["error_model"] and cert["motion_bounds"]["held"]
+    assert cert["terms"]["torque"] == pytest.approx(run_.noise_bound, rel=1e-12)  # kernel of unit integral
+
+
+def test_certificate_catches_an_understated_spec(run_and_spec):
+    run_, spec = run_and_spec
+    assert _short(run_, spec)["violations"] == 0
+    # qdd_max far below the truth: the motion bound is reported broken, and the sign/truncation radii fail
+    slow = _short(run_, spec, qdd_max=np.full(4, 1.0))
+    assert not slow["motion_bounds"]["held"] and slow["checks"]["motion"]["violations"] > 0
+    # an encoder 500 x finer than the simulated one: the measurement radii fail against the truth
+    fine = _short(run_, spec, position_resolution=np.full(4, 2 * np.pi / 20000 / 500))
+    assert fine["checks"]["measurement"]["violations"] > 0
+    # a torque error below the injected one
+    weak = _short(run_, spec, torque_error=np.full(4, 0.1))
+    assert weak["checks"]["torque"]["violations"] > 0
+
+
+@pytest.mark.slow
+def test_enclosure_campaign_with_the_derived_error_model(tmp_path):
+    """`h4bench run enclosure --quick --error-model derived`: 0 certificate violations and 0 misses of the
+    certified box over the campaign's runs (about 50 s on 2 cores)."""
+    from h4bench.scenarios.runner import run_scenario
+
+    result = run_scenario("enclosure", quick=True, out=tmp_path / "enc", workers=2, error_model="derived")
+    cert = result["certificate"]
+    assert cert["runs"] == result["runs"] == 4 and cert["rows"] > 0
+    assert cert["violations"] == 0 and cert["min_margin"] >= 0
+    assert result["methods"]["certified"]["misses"] == 0
+
+
+def test_derived_error_model_is_refused_where_it_is_not_built(tmp_path):
+    from h4bench.scenarios.runner import run_scenario
+    from h4bench.scenarios.spec import ScenarioError
+
+    with pytest.raises(ScenarioError, match="--error-model derived is available for the kinds"):
+        run_scenario("structure", quick=True, out=tmp_path / "s", error_model="derived")
+    with pytest.raises(ScenarioError, match="error_model must be 'tuned' or 'derived'"):
+        run_scenario("paper", quick=True, out=tmp_path / "p", error_model="guessed")
