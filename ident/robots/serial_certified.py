@@ -62,9 +62,17 @@ import numpy as np
 
 from h4bench.ident.numerics.interval import up
 from h4bench.ident.processing.errorspec import ErrorSpec
+from h4bench.ident.processing.weakform import (
+    RowWindows,
+    coulomb_columns,
+    imot_columns,
+    make_kernel,
+    torque_rows,
+    viscous_columns,
+)
 
 __all__ = ["CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "check_motion_bounds",
-           "geometry_bounds", "secant_span", "signed_uncertain_hull", "triangle_kernel"]
+           "geometry_bounds", "secant_span", "signed_uncertain_hull"]
 
 TERMS = ("position", "motion", "coulomb", "float", "torque", "model", "rounding")  # regressor side, then torque side
 # the inertial columns' radii by origin (``parts`` of the equation): M(q) within the step, Coriolis + gravity at the
@@ -94,18 +102,12 @@ def geometry_bounds(robot) -> dict:
     return {"R": R, "M": m_bar, "dM": 2.0 * m_bar, "gamma": 3.0 * m_bar, "g": g_bar, "dg": 2.0 * g_bar}
 
 
-def triangle_kernel(half_width: int, dt: float) -> np.ndarray:
-    """(2 H + 1,) the kernel's values at the window's sample instants [1/s]: a triangle with ``int k dt = 1``."""
-    j = np.arange(2 * half_width + 1)
-    return (1.0 - np.abs(j - half_width) / half_width) / (half_width * dt)
-
-
-def secant_span(spec: ErrorSpec, e_typ: float) -> int:
-    """Half-span m [steps] of the speed secants: minimises ``qdd_max m dt / 2 + e / (m dt)``."""
+def secant_span(spec: ErrorSpec, e_typ: float, cap: int = 50) -> int:
+    """Half-span m [steps] of the speed secants: minimises ``qdd_max m dt / 2 + e / (m dt)``, at most ``cap``."""
     qdd = float(np.max(spec.qdd_max))
     if qdd <= 0:
-        return 1
-    return max(1, int(round(math.sqrt(2.0 * e_typ / qdd) / spec.sample_period)))
+        return cap
+    return int(min(cap, max(1, round(math.sqrt(2.0 * e_typ / qdd) / spec.sample_period))))
 
 
 # ------------------------------------------------------------------------------------------------ equation
@@ -313,9 +315,10 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     m = secant_span(spec, float(np.median(e)))
     st_ = _Steps(robot, geo, q, e, dt, spec.qd_max, spec.qdd_max, m)
     qddm = spec.qdd_max
-    k = triangle_kernel(H, dt)  # (L+1,) at the window's samples
     L = 2 * H
-    K1 = _mid(k) * dt  # int_step k, k >= 0
+    kern = make_kernel(L, dt, "triangle")
+    k = kern.knots  # (L+1,) at the window's samples [1/s], int k = 1
+    K1 = kern.integrals  # int_step k, k >= 0
     kp = np.diff(k) / dt  # (L,) slopes [1/s^2]
     kp_ext = np.concatenate([[0.0], kp, [0.0]])
     dkp = np.abs(np.diff(kp_ext))  # (L+1,) |k'_{j-1} - k'_j| at sample j of the window
@@ -329,21 +332,8 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     Wi = np.zeros((R_, nj, ni))
     mag = np.zeros((R_, nj, ni))
     parts_i = {name: np.zeros((R_, nj, ni)) for name in PARTS}
-    Fqd, Fqdd = np.zeros((R_, nj)), np.zeros((R_, nj))
-    r_qd_pos, r_qd_mot, r_qdd_pos = np.zeros((R_, nj)), np.zeros((R_, nj)), np.zeros((R_, nj))
-    Fsign, r_sign = np.zeros((R_, nj)), np.zeros((R_, nj))
-    Fsign_m, r_sign_m = np.zeros(R_), np.zeros(R_)
-    y = np.zeros((R_, nj))
-    y_abs = np.zeros((R_, nj))
     model, data = robot.model, robot.data
-    if spec.torque_timing == "sample":  # exact integral of k times the interpolation of the samples
-        c_tau = np.zeros(L + 1)
-        c_tau[:-1] += dt * (k[:-1] / 3 + k[1:] / 6)
-        c_tau[1:] += dt * (k[:-1] / 6 + k[1:] / 3)
-    else:
-        c_tau = np.append(K1, 0.0)
-    vh, dq, ebar = st_.vh, st_.dq, st_.ebar
-    ev_max = st_.ev_mot_max[None, :] + st_.ev_pos
+    vh, dq = st_.vh, st_.dq
     for r, s in enumerate(starts):
         st = slice(s, s + L)  # steps of the window
         sm = slice(s, s + L + 1)  # samples of the window
@@ -385,25 +375,31 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
             parts_i[name][r] = part[name]
         if progress is not None:
             progress(r + 1, R_)
-        # ---- friction / rotor / offset functionals per joint
-        Fqdd[r] = -kp @ dq[st]
-        r_qdd_pos[r] = dkp @ e[sm] + gamma_l * (np.abs(kp) @ np.abs(dq[st]))
-        qtrap = 0.5 * (q[s:s + L] + q[s + 1:s + L + 1]) * dt
-        Fqd[r] = -kp @ qtrap
-        r_qd_pos[r] = (np.abs(kp_ext[:-1] + kp_ext[1:]) * dt / 2) @ e[sm] + gamma_l * (np.abs(kp) @ np.abs(qtrap))
-        r_qd_mot[r] = np.sum(np.abs(kp)) * qddm * dt**3 / 12
-        certain = np.abs(vh[st]) > ev_max[st]
-        Fsign[r] = (np.where(certain, np.sign(vh[st]), 0.0) * K1[:, None]).sum(axis=0)
-        r_sign[r] = (np.where(certain, 0.0, 1.0) * K1[:, None]).sum(axis=0)
-        if robot.coupled_wrist is not None:
-            a, b = robot.coupled_wrist
-            vm = vh[st, a] + vh[st, b]
-            cm = np.abs(vm) > ev_max[st, a] + ev_max[st, b]
-            Fsign_m[r] = np.sum(np.where(cm, np.sign(vm), 0.0) * K1)
-            r_sign_m[r] = np.sum(np.where(cm, 0.0, 1.0) * K1)
-        y[r] = c_tau @ tau[sm]
-        y_abs[r] = np.abs(c_tau) @ np.abs(tau[sm])
     st_.evict(N)
+    # ---- friction, rotor inertia, offsets (the generic weak-form columns) and the torque side
+    windows = RowWindows(start=starts, steps=L)
+    Fqdd, r_qdd_pos, _ = imot_columns(q, e, windows, kern)
+    Fqd, r_qd_pos, r_qd_mot = viscous_columns(q, e, windows, kern, qddm)
+    Fsign, r_sign, _ = coulomb_columns(q, e, windows, kern, qddm)
+    if robot.coupled_wrist is not None:  # sign(qd_a + qd_b) of the wrist motor, the same per-step rule
+        a, b = robot.coupled_wrist
+        v1 = np.diff(q, axis=0) / dt
+        vm = v1[:, a] + v1[:, b]
+        margin = up((e[:-1, a] + e[1:, a] + e[:-1, b] + e[1:, b]) / dt + 0.5 * (qddm[a] + qddm[b]) * dt)
+        cm = np.abs(vm) > margin
+        Fsign_m = windows.gather(np.where(cm, np.sign(vm), 0.0)) @ K1
+        r_sign_m = up(windows.gather((~cm).astype(float)) @ K1 + gamma_l)
+    if spec.torque_timing == "sample":  # exact integral of k times the interpolation of the samples
+        c_tau = np.zeros(L + 1)
+        c_tau[:-1] += dt * (k[:-1] / 3 + k[1:] / 6)
+        c_tau[1:] += dt * (k[:-1] / 6 + k[1:] / 3)
+        taus = windows.gather_knots(tau)  # (R, L + 1, n)
+        y = np.einsum("u,ruj->rj", c_tau, taus)
+        y_fp = gamma_l * np.einsum("u,ruj->rj", np.abs(c_tau), np.abs(taus)) + 1e-300
+        k_abs = float(up(np.sum(np.abs(c_tau)) * (1 + gamma_l)))
+    else:
+        y, y_fp = torque_rows(tau, windows, kern)
+        k_abs = kern.l1
     # ---- assemble the standard columns (n rows per window)
     p = robot.n_parameters
     Wc = np.zeros((R_, nj, p))
@@ -450,14 +446,13 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     Dflt[:, :, :ni] = (_PIN_REL + gamma_l) * mag * mask[None]
     Dflt[:, :, ni:] = gamma_l * np.abs(Wc[:, :, ni:])
     # ---- torque side
-    k_abs = float(np.sum(np.abs(c_tau)))
     t_err = spec.torque_error * k_abs
     if spec.torque_timing == "sample" and spec.torque_rate is not None:
         t_err = t_err + spec.torque_rate * dt / 2 * k_abs
     if spec.latency > 0:
         t_err = t_err + spec.torque_rate * spec.latency * k_abs
     model_term = spec.model_error * k_abs
-    y_rnd = gamma_l * y_abs + 1e-300
+    y_rnd = y_fp
     # ---- base columns, flattened rows (window-major, joint-minor)
     ind = np.asarray(base.independent)
     flat = lambda x: x.reshape(R_ * nj, p)  # noqa: E731
