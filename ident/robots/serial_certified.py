@@ -536,15 +536,16 @@ class SpecCheck:
                 "qd_max": self.qd_max.tolist(), "qdd_max": self.qdd_max.tolist(), "contradicted": self.contradicted}
 
 
-def check_motion_bounds(q, spec: ErrorSpec, span: int = 20) -> SpecCheck:
+def check_motion_bounds(q, spec: ErrorSpec, span: int = 20, position_error=None) -> SpecCheck:
     """Lower bounds of the TRUE max |qd| and max |qdd| that the measured positions prove.
 
     A secant over ``span`` steps is the mean of qd over it (true positions), so ``max|qd| >= |secant| - (e_a +
     e_b) / (span dt)``; the second difference over ``span`` steps is a weighted mean of qdd, so ``max|qdd| >=
     |second difference| - 4 e / (span dt)^2``. A stated bound below these is contradicted by the data.
+    position_error : (N, n) bound on the position error [rad], default ``spec.position_error(q)``.
     """
     q = np.asarray(q, dtype=float)
-    e = spec.position_error(q)
+    e = spec.position_error(q) if position_error is None else np.asarray(position_error, dtype=float)
     h = span * spec.sample_period
     sec = (q[span:] - q[:-span]) / h
     qd_lo = np.max(np.abs(sec) - (e[span:] + e[:-span]) / h, axis=0)
