@@ -297,8 +297,9 @@ def scenarios() -> None:
 def identify(
     file: Path = typer.Argument(..., help="CSV log: header t,q1..q4,tau1..tau4 (SI units; with --urdf "
                                 "t,q1..qn,tau1..taun, joint side)"),
-    bound: str = typer.Option(..., help="bound on |tau - W theta| for every raw sample [N m]: one number, "
-                              "4 (n) comma-separated numbers (joints 1..4 (n)) or, H4 only, a .toml/.csv file"),
+    bound: Optional[str] = typer.Option(None, help="bound on |tau - W theta| for every raw sample [N m]: one "
+                                        "number, 4 (n) comma-separated numbers (joints 1..4 (n)) or, H4 only, a "
+                                        ".toml/.csv file (required unless --spec)"),
     urdf: Optional[Path] = typer.Option(None, help="a serial robot's URDF: identify its base parameters in a "
                                         "physical prior (--mass, --reach) instead of the H4's 14"),
     mass: Optional[str] = typer.Option(None, help="--urdf: total mass of the prior [kg] (default 2 x the URDF's)"),
@@ -326,6 +327,8 @@ def identify(
     as_json: bool = typer.Option(False, "--json", help="print result.json (the only output on stdout)"),
     pairs: Optional[str] = typer.Option(None, help="the feasible set's projections onto pairs, feasible_set.png: "
                                         "auto (the most coupled) or NAME:NAME,... (e.g. Fv1:Fs1,Imot1:Mnac)"),
+    spec: Optional[Path] = typer.Option(None, help="--urdf: an error specification (TOML [error_model]) instead "
+                                        "of --bound: the certified box of the derived interval equation"),
 ) -> None:
     """The estimators on a user's own data; prints the table (or result.json) and writes result.json.
 
@@ -343,7 +346,12 @@ def identify(
         except ValueError:
             raise OptionError(f"--method must be one of {' | '.join(METHODS)} (or an estimator plugin), "
                               f"got {method!r}") from None
-        if urdf is not None:
+        if spec is not None:
+            result = _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset,
+                                    coupled_wrist, cutoff_hz, decimation, prior, model, out, pairs, torque_timing)
+        elif bound is None:
+            raise OptionError("--bound is required (or --spec FILE with --urdf), got neither")
+        elif urdf is not None:
             if torque_timing != "hold":
                 raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
                                   f"regressor at the sample instants), got --torque-timing {torque_timing}")
@@ -367,12 +375,18 @@ def identify(
         if result.get("parameter_expressions"):
             import textwrap
 
-            typer.echo(f"min consistent bound / ||h||_1 (raw rows, approximate): "
-                       f"{result['min_consistent_bound_raw']:.4g} N m")
+            if "min_consistent_bound_raw" in result:
+                typer.echo(f"min consistent bound / ||h||_1 (raw rows, approximate): "
+                           f"{result['min_consistent_bound_raw']:.4g} N m")
+            if "certified" in result:
+                c = result["certified"]
+                typer.echo(f"certified: {c['rows']} rows, dominant term {c['dominant']}; stated motion bounds "
+                           + ("contradicted: " + "; ".join(c["spec_check"]["contradicted"])
+                              if c["spec_check"]["contradicted"] else "not contradicted by the data"))
             typer.echo("base parameters (base <- standard):")
             for n, e in zip(result["parameters"], result["parameter_expressions"]):
                 typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
-    if result.get("kind") == "identify" and not as_json:
+    if result.get("kind") == "identify" and not as_json and "certified" not in result:
         unsound = result.get("unsound") or []
         typer.echo("narrower-than-hull check: " + (f"UNSOUND {', '.join(unsound)}" if unsound else
                    "no guaranteed box is narrower than the exact hull" if result.get("hull_reference") else
@@ -386,6 +400,31 @@ def identify(
         raise typer.Exit(EXIT_INCONSISTENT)
 
 
+def _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
+                   decimation, prior, model, out, pairs, torque_timing) -> dict:
+    """``--spec``: the certified box (:mod:`scenarios.identify_certified`); options of the tuned path are refused."""
+    from h4bench.scenarios.identify import OptionError, parse_number
+
+    if urdf is None:
+        raise OptionError(f"--spec needs --urdf (the H4's certified identify is not available here), got --spec {spec}")
+    for name, value in (("--bound", bound), ("--method", None if method == "hull" else method),
+                        ("--cutoff-hz", None if cutoff_hz == "100" else cutoff_hz),
+                        ("--decimation", None if decimation == "100" else decimation), ("--prior", prior),
+                        ("--model", model), ("--pairs", pairs),
+                        ("--torque-timing", None if torque_timing == "hold" else torque_timing)):
+        if value is not None:
+            raise OptionError(f"{name} does not apply with --spec (the bound, the processing and the torque timing "
+                              f"come from the spec file; the box is the certified one), got {name} {value}")
+    n = _urdf_joints(urdf)
+    from h4bench.scenarios.identify_certified import identify_urdf_spec
+
+    return identify_urdf_spec(file, urdf, spec,
+                              mass=None if mass is None else parse_number(mass, "--mass", positive=True),
+                              reach=None if reach is None else parse_number(reach, "--reach", positive=True),
+                              friction=friction, rotor_inertia=rotor, offset=offset,
+                              coupled_wrist=_coupled_wrist(coupled_wrist, n), out=out)
+
+
 def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
                    decimation, prior, model, out, pairs=None) -> dict:
     from h4bench.scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
@@ -394,10 +433,26 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         if value is not None:
             raise OptionError(f"{name} is for the H4; with --urdf the prior is physical (--mass, --reach), got "
                               f"{name} {value}")
+    n = _urdf_joints(urdf)
+    wrist = _coupled_wrist(coupled_wrist, n)
+    dec = parse_number(decimation, "--decimation", positive=True)
+    if dec != int(dec):
+        raise OptionError(f"--decimation must be an integer >= 1, got {decimation!r}")
+    return identify_urdf_csv(
+        file, urdf, parse_joint_bound(bound, n), method,
+        mass=None if mass is None else parse_number(mass, "--mass", positive=True),
+        reach=None if reach is None else parse_number(reach, "--reach", positive=True),
+        friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=wrist,
+        cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out, pairs=pairs)
+
+
+def _urdf_joints(urdf) -> int:
+    """The number of joints of ``--urdf`` (the parser's own messages on stderr); OptionError names the option."""
+    from h4bench.ident.robots.serial import SerialRobot
+    from h4bench.scenarios.identify import OptionError
+
     if not Path(urdf).is_file():
         raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
-    from h4bench.ident.robots.serial import SerialRobot
-
     native: list = []
     try:
         with native_stderr_captured(native):
@@ -408,24 +463,22 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
                           + (f" (parser: {said})" if said else "")) from None
     if "".join(native).strip():
         sys.stderr.write("".join(native))
-    wrist = None
-    if coupled_wrist is not None:
-        parts = str(coupled_wrist).split(",")
-        try:
-            wrist = tuple(int(x) - 1 for x in parts)
-        except ValueError:
-            wrist = ()
-        if len(wrist) != 2 or wrist[0] == wrist[1] or not all(0 <= j < n for j in wrist):
-            raise OptionError(f"--coupled-wrist must be two distinct joints A,B in 1..{n}, got {coupled_wrist!r}")
-    dec = parse_number(decimation, "--decimation", positive=True)
-    if dec != int(dec):
-        raise OptionError(f"--decimation must be an integer >= 1, got {decimation!r}")
-    return identify_urdf_csv(
-        file, urdf, parse_joint_bound(bound, n), method,
-        mass=None if mass is None else parse_number(mass, "--mass", positive=True),
-        reach=None if reach is None else parse_number(reach, "--reach", positive=True),
-        friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=wrist,
-        cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out, pairs=pairs)
+    return n
+
+
+def _coupled_wrist(coupled_wrist, n: int):
+    """``--coupled-wrist A,B`` (1-based) -> 0-based (a, b) or None; OptionError names the option."""
+    from h4bench.scenarios.identify import OptionError
+
+    if coupled_wrist is None:
+        return None
+    try:
+        wrist = tuple(int(x) - 1 for x in str(coupled_wrist).split(","))
+    except ValueError:
+        wrist = ()
+    if len(wrist) != 2 or wrist[0] == wrist[1] or not all(0 <= j < n for j in wrist):
+        raise OptionError(f"--coupled-wrist must be two distinct joints A,B in 1..{n}, got {coupled_wrist!r}")
+    return wrist
 
 
 def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold",

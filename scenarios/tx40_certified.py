@@ -22,7 +22,7 @@ __all__ = ["DEFAULTS", "certify", "error_spec", "report_lines"]
 
 # [tx40.certified] and [tx40.error_model]: every entry a sensor fact or a stated assumption, with its source
 DEFAULTS = {
-    "certified": {"half_width": 200, "stride": 100, "max_samples": 0, "torque_sweep": [0.5, 1.0, 2.0], "refine": 1},
+    "certified": {"half_width": 200, "stride": 100, "max_samples": 0, "torque_sweep": [0.5, 1.0, 2.0], "refine": 3},
     "error_model": {
         "sample_period": 2e-4, "significant_digits": 5, "torque_timing": "sample",
         "torque_error": [3.96, 3.96, 3.1, 1.38, 1.3, 0.92],

@@ -1,0 +1,129 @@
+"""``h4bench identify log.csv --urdf ROBOT.urdf --spec spec.toml``: the certified box of any serial robot's log.
+
+The spec file's ``[error_model]`` table (:class:`ident.processing.errorspec.ErrorSpec`: sample period, position
+resolution or significant digits, torque timing, torque error, stated qd_max and qdd_max, model error, sources)
+replaces ``--bound``: the derived interval equation (:mod:`ident.robots.serial_certified`) of the whole log,
+the Oettli-Prager hull in the physical prior (as ``--urdf`` documents), the stated motion bounds checked
+against the data, and the term that dominates the radii. An optional ``[certified]`` table sets the kernel:
+``window`` [s] (default 0.08: a triangle over that many seconds) and ``stride`` [s] (default 0.02).
+"""
+
+from __future__ import annotations
+
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from h4bench import ident
+from h4bench.scenarios.identify import OptionError, read_serial_log, urdf_robot_and_prior
+from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
+
+__all__ = ["KERNEL_DEFAULTS", "identify_urdf_spec", "read_kernel"]
+
+KERNEL_DEFAULTS = {"window": 0.08, "stride": 0.02, "refine": 3}
+
+
+def read_kernel(spec_path) -> dict:
+    """The optional ``[certified]`` table of the spec file (``window``, ``stride`` [s], ``refine``); errors name
+    ``--spec`` and the file."""
+    path = Path(spec_path)
+    try:
+        table = tomllib.loads(path.read_text()).get("certified", {})
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise OptionError(f"--spec {path}: cannot read it as TOML ({exc})") from None
+    if not isinstance(table, dict) or set(table) - set(KERNEL_DEFAULTS):
+        raise OptionError(f"--spec {path} [certified]: expected some of {sorted(KERNEL_DEFAULTS)}, got "
+                          f"{sorted(table) if isinstance(table, dict) else table!r}")
+    out = {**KERNEL_DEFAULTS, **table}
+    for k in ("window", "stride"):
+        v = out[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise OptionError(f"--spec {path} [certified].{k} must be a number > 0 [s], got {v!r}")
+    if isinstance(out["refine"], bool) or not isinstance(out["refine"], int) or out["refine"] < 0:
+        raise OptionError(f"--spec {path} [certified].refine must be an integer >= 0, got {out['refine']!r}")
+    return out
+
+
+def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction: bool = True,
+                       rotor_inertia: bool = True, offset: bool = True, coupled_wrist=None, out=None) -> dict:
+    """The certified box of a joint-side CSV log (``t, q1..qn, tau1..taun``) of the serial robot ``urdf`` under the
+    error specification ``spec_path``; writes ``result.json`` into ``out``. Returns the result dict
+    (``methods.certified``, ``error_model``, ``certified``; ``consistent`` False when the data contradict the
+    spec: the hull's set is proven empty)."""
+    from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
+    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds, signed_uncertain_hull
+
+    t0 = time.perf_counter()
+    robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,
+                                                   offset=offset, coupled_wrist=coupled_wrist)
+    nj = robot.n_joints
+    spec_path = Path(spec_path)
+    if not spec_path.is_file():
+        raise OptionError(f"--spec must name an existing TOML file, got {str(spec_path)!r} (not found)")
+    try:
+        spec = ErrorSpec.from_toml(spec_path, nj)
+    except ErrorSpecError as exc:
+        msg = str(exc)
+        raise OptionError(msg if msg.startswith("--spec") else f"--spec {spec_path}: {msg}") from None
+    kernel = read_kernel(spec_path)
+    out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
+    q, tau, dt = read_serial_log(path, nj)
+    if abs(dt - spec.sample_period) > 1e-3 * spec.sample_period:
+        raise OptionError(f"--spec {spec_path}: sample_period = {spec.sample_period:g} s, but the log {str(path)!r} "
+                          f"is sampled every {dt:g} s")
+    H = max(2, int(round(kernel["window"] / dt / 2)))
+    stride = max(1, int(round(kernel["stride"] / dt)))
+    try:
+        eq = certified_equation(robot, base, q, tau, spec, half_width=H, stride=stride)
+    except ValueError as exc:
+        raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None
+    check = check_motion_bounds(q, spec, span=3)
+    prior = ident.Box(np.asarray(prior_info["lower"]), np.asarray(prior_info["upper"]), names=base.names)
+    entry: dict = {"kind": "guaranteed", "rigorous": True}
+    result = {
+        "scenario": f"identify-{Path(path).stem}", "kind": "identify", "robot": str(urdf), "source": str(path),
+        "samples": int(q.shape[0]), "dt": dt, "joints": list(robot.joint_names), "parameters": list(base.names),
+        "parameter_expressions": list(base.expressions), "parameter_units": list(base.units),
+        "standard_parameters": list(robot.names), "true": None, "rows": len(eq), "prior": prior_info,
+        "error_model": {**spec.to_dict(), "file": str(spec_path)}, "consistent": None,
+        "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,
+                            "singular_gap": base.singular_gap},
+    }
+    t1 = time.perf_counter()
+    try:
+        box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]))
+    except ident.InconsistentDataError as exc:
+        box = None
+        scale = getattr(exc, "scale_lower", None)
+        entry.update(status="inconsistent", message=str(exc), error=type(exc).__name__, scale_lower=scale)
+        result["consistent"] = False
+        result["inconsistency"] = {"scale_lower": scale, "min_bound": None if scale is None else
+                                   float(scale * np.max(eq.bound))}
+    if box is not None:
+        result["consistent"] = True
+        rel = box.width / (prior.upper - prior.lower)
+        entry.update(status="ok", lower=box.lower.tolist(), upper=box.upper.tolist(), width=box.width.tolist(),
+                     relative_width_to_prior=rel.tolist(), narrowed_parameters=int(np.sum(rel < 0.99)),
+                     info={k: box.info.get(k) for k in ("nonempty_proven", "refinements", "lp_solves")})
+    entry["seconds"] = time.perf_counter() - t1
+    theta_abs = (np.maximum(np.abs(box.lower), np.abs(box.upper)) if box is not None
+                 else np.maximum(np.abs(prior.lower), np.abs(prior.upper)))
+    rr = eq.row_radius(theta_abs)
+    total = rr.pop("total")
+    summed = sum(float(np.sum(v)) for v in rr.values()) or 1.0
+    terms = {k: {"max": float(np.max(v)), "median": float(np.median(v)), "share": float(np.sum(v)) / summed}
+             for k, v in rr.items()}
+    result["methods"] = {"certified": entry}
+    result["certified"] = {
+        "rows": len(eq), "kernel": {k: eq.info[k] for k in ("kernel", "half_width", "stride", "window_seconds",
+                                                             "secant_half_span")},
+        "geometry": eq.info["geometry"], "terms": terms, "dominant": max(terms, key=lambda k: terms[k]["share"]),
+        "terms_at": "|theta| = the certified box's largest magnitudes (the prior's when the set is empty)",
+        "radius_median_per_joint": [float(np.median(total[eq.joint == j])) for j in range(nj)],
+        "spec_check": check.to_dict(), "seconds": {"equation": eq.info["seconds"], "total": time.perf_counter() - t0},
+    }
+    with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
+        write_json(tmp / "result.json", result)
+    return result
