@@ -262,9 +262,13 @@ class _Steps:
         if prev is None and with_prev and j - 1 >= self.m - 1:
             prev = self._compute(j - 1, with_prev=False)
         if prev is not None:
-            dMj = np.abs(prev["Mc"] - Mc) + prev["dlt"] + dlt  # bound on |M_{j-1} - M_j| at the true positions
+            dMhat = prev["Mc"] - Mc
+            dMj = np.abs(dMhat) + prev["dlt"] + dlt  # bound on |M_{j-1} - M_j| at the true positions
             out["B_mot"] = np.einsum("bic,b->ic", dMj, self.ew_mot)
-            out["B_pos"] = np.einsum("bic,b->ic", dMj, self.ew_pos[j])
+            # the secant's measurement error times dMhat goes through the row's exact gradient (window loop);
+            # here its product with the difference between the true and the measured dM
+            out["B_pos"] = np.einsum("bic,b->ic", prev["dlt"] + dlt, self.ew_pos[j])
+            out["dMhat"] = dMhat
             out["Eknot"] = np.einsum("bic,b->ic", np.abs(prev["Mc"]), self.e[j])
             out["Ediff"] = np.einsum("bic,b->ic", np.abs(prev["Mc"] - Mc), self.e[j])
         return out
@@ -368,6 +372,12 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
         G[:L] -= Wt  # sample offset jj + 1 - m
         eo = e[s + 1 - m: s + L + m]  # (L + 2m - 1, a)
         part["coriolis_position"] += np.einsum("oaic,oa->ic", np.abs(G), eo) / st_.S
+        # the sample-instant secants w_j in sum_j k_j w_j (M_{j-1} - M_j): (delta_{j+m} - delta_{j-m}) / (2 m dt)
+        Wk = k[:, None, None, None] * np.stack([st_.get(s + jj)["dMhat"] for jj in range(L + 1)])  # (L+1, b, i, c)
+        G2 = np.zeros((L + 1 + 2 * m,) + Wk.shape[1:])
+        G2[2 * m:] += Wk  # sample offset jj + m, stored from offset -m
+        G2[:L + 1] -= Wk  # sample offset jj - m
+        part["speed_position"] += np.einsum("obic,ob->ic", np.abs(G2), e[s - m: s + L + m + 1]) / (2 * m * dt)
         d_end = st_.get(s + L)  # sample s + L: the last boundary term |k'_{L-1}| |M_{L-1}| e_L
         part["gradient_position"] += dkp[L] * d_end["Eknot"]
         Wi[r], mag[r] = acc, ab
