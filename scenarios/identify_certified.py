@@ -110,18 +110,12 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     entry["seconds"] = time.perf_counter() - t1
     theta_abs = (np.maximum(np.abs(box.lower), np.abs(box.upper)) if box is not None
                  else np.maximum(np.abs(prior.lower), np.abs(prior.upper)))
-    rr = eq.row_radius(theta_abs)
-    total = rr.pop("total")
-    summed = sum(float(np.sum(v)) for v in rr.values()) or 1.0
-    terms = {k: {"max": float(np.max(v)), "median": float(np.median(v)), "share": float(np.sum(v)) / summed}
-             for k, v in rr.items()}
     result["methods"] = {"certified": entry}
     result["certified"] = {
         "rows": len(eq), "kernel": {k: eq.info[k] for k in ("kernel", "half_width", "stride", "window_seconds",
                                                              "secant_half_span")},
-        "geometry": eq.info["geometry"], "terms": terms, "dominant": max(terms, key=lambda k: terms[k]["share"]),
+        "geometry": eq.info["geometry"], **eq.summary(theta_abs),
         "terms_at": "|theta| = the certified box's largest magnitudes (the prior's when the set is empty)",
-        "radius_median_per_joint": [float(np.median(total[eq.joint == j])) for j in range(nj)],
         "spec_check": check.to_dict(), "seconds": {"equation": eq.info["seconds"], "total": time.perf_counter() - t0},
     }
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:

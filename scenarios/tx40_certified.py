@@ -156,21 +156,13 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
     # which term dominates: the row radii at the largest |theta| of the box the hull worked with
     theta_abs = (np.maximum(np.abs(box1.lower), np.abs(box1.upper)) if box1 is not None
                  else np.maximum(np.abs(s.blo), np.abs(s.bhi)))
-    rr = eq.row_radius(theta_abs)
-    total = rr.pop("total")
-    summed = sum(float(np.sum(v)) for v in rr.values()) or 1.0
-    terms = {k: {"max": float(np.max(v)), "median": float(np.median(v)), "share": float(np.sum(v)) / summed}
-             for k, v in rr.items()}
-    parts = {k: {"max": float(np.max(v @ theta_abs)), "median": float(np.median(v @ theta_abs))}
-             for k, v in eq.parts.items()}
     rw = eq.row_radius(np.abs(s.w.theta))
     certified = {
         "rows": len(eq), "rows_heldout": len(eq_ho), "identify_samples": int(n1), "heldout_samples": int(n2),
         "kernel": {k: eq.info[k] for k in ("kernel", "half_width", "stride", "window_seconds", "secant_half_span")},
         "geometry": eq.info["geometry"],
         "terms_at": "|theta| = the certified box's largest magnitudes (the radius the hull had to allow)",
-        "terms": terms, "parts": parts, "dominant": max(terms, key=lambda k: terms[k]["share"]),
-        "radius_median_per_joint": [float(np.median(total[eq.joint == j])) for j in range(6)],
+        **eq.summary(theta_abs),
         "radius_median_per_joint_at_wls": [float(np.median(rw["total"][eq.joint == j])) for j in range(6)],
         "wls_residual_max_per_joint": [float(np.max(np.abs((eq.y - eq.Wc @ s.w.theta)[eq.joint == j])))
                                        for j in range(6)],

@@ -143,6 +143,21 @@ class CertifiedEquation:
         out["total"] = self.bound + self.D @ t
         return out
 
+    def summary(self, theta_abs) -> dict:
+        """JSON-ready radii at ``|theta| <= theta_abs``: ``terms`` (per term the ``max``, ``median`` row radius
+        [N m] and its ``share`` of the summed radii), ``parts`` (the inertial parts' ``max``, ``median``),
+        ``dominant`` (the term of largest share), ``radius_median_per_joint`` [N m]."""
+        t = np.abs(np.asarray(theta_abs, dtype=float))
+        rr = self.row_radius(t)
+        total = rr.pop("total")
+        summed = sum(float(np.sum(v)) for v in rr.values()) or 1.0
+        terms = {k: {"max": float(np.max(v)), "median": float(np.median(v)), "share": float(np.sum(v)) / summed}
+                 for k, v in rr.items()}
+        parts = {k: {"max": float(np.max(v @ t)), "median": float(np.median(v @ t))} for k, v in self.parts.items()}
+        nj = int(self.joint.max()) + 1
+        return {"terms": terms, "parts": parts, "dominant": max(terms, key=lambda k: terms[k]["share"]),
+                "radius_median_per_joint": [float(np.median(total[self.joint == j])) for j in range(nj)]}
+
 
 def _mid(x):
     return 0.5 * (x[:-1] + x[1:])
@@ -508,18 +523,14 @@ def certificate(eq: CertifiedEquation, W_true, y_true, theta_true) -> dict:
     err_W = np.abs(eq.Wc - W_true)
     err_y = np.abs(eq.y - y_true)
     res = np.abs(eq.y - eq.Wc @ th)
-    rr = eq.row_radius(np.abs(th))
-    total = rr.pop("total")
-    summed = sum(float(np.sum(v)) for v in rr.values()) or 1.0
+    total = eq.row_radius(np.abs(th))["total"]
+    summary = eq.summary(np.abs(th))
     return {
         "rows": int(len(eq)), "entry_violations": int(np.sum(err_W > eq.D)),
         "torque_violations": int(np.sum(err_y > eq.bound)), "violations": int(np.sum(res > total)),
         "min_margin": float(np.min(total - res)), "max_ratio": float(np.max(res / total)),
         "actual_max": float(np.max(res)), "radius_median": float(np.median(total)),
-        "terms": {k: {"max": float(np.max(v)), "median": float(np.median(v)), "share": float(np.sum(v)) / summed}
-                  for k, v in rr.items()},
-        "parts": {k: {"max": float(np.max(v @ np.abs(th))), "median": float(np.median(v @ np.abs(th)))}
-                  for k, v in eq.parts.items()},
+        "terms": summary["terms"], "parts": summary["parts"],
     }
 
 
