@@ -133,3 +133,6 @@ def test_run_tx40_derived_quick(tmp_path):
     assert set(c["torque_error_sweep"]) == {"0.5", "1", "2"} and c["dominant"] in c["terms"]
     assert c["spec_check"]["contradicted"] == []
     assert "## Certified box" in (tmp_path / "tx40" / "report.md").read_text()
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "results.md").read_text()
+    undocumented = [k for k in [*c, *m] if f".{k}`" not in doc and f"`{k}`" not in doc]
+    assert not undocumented, f"certified keys not in docs/results.md: {undocumented}"
