@@ -53,7 +53,8 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     (``methods.certified``, ``error_model``, ``certified``; ``consistent`` False when the data contradict the
     spec: the hull's set is proven empty)."""
     from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
-    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds, signed_uncertain_hull
+    from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
+    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds
 
     t0 = time.perf_counter()
     robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,

@@ -2,7 +2,7 @@
 
 The log's stated specification (``[tx40.error_model]``, :func:`error_spec`), the derived interval equation of
 :mod:`ident.robots.serial_certified` on the identification part and, separately, on the held-out part, the
-Oettli-Prager hull in the physical prior (:func:`ident.robots.serial_certified.signed_uncertain_hull`), its
+Oettli-Prager hull in the physical prior (:func:`ident.estimators.uncertain_signed.signed_uncertain_hull`), its
 held-out coverage (the interval envelope ``[Wc - D, Wc + D] x box`` widened by the row's bound, against the
 held-out rows' torques), which term dominates the radii, the width beside the tuned hull, and the width's
 sensitivity to the assumed torque error (the bound's torque term scaled, the equation unchanged).
@@ -81,7 +81,7 @@ def _coverage(eq, box, bound):
 
 def _hull(eq, bound, prior, refine):
     from h4bench.ident import InconsistentDataError
-    from h4bench.ident.robots.serial_certified import signed_uncertain_hull
+    from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
 
     try:
         return signed_uncertain_hull(eq.Wc, eq.D, eq.y, bound, prior, refine=refine), None

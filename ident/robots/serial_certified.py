@@ -60,7 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from h4bench.ident.numerics.interval import down, up
+from h4bench.ident.numerics.interval import up
 from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.processing.weakform import (
     RowWindows,
@@ -72,7 +72,7 @@ from h4bench.ident.processing.weakform import (
 )
 
 __all__ = ["CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "check_motion_bounds",
-           "geometry_bounds", "secant_span", "signed_uncertain_hull"]
+           "geometry_bounds", "secant_span"]
 
 TERMS = ("position", "motion", "coulomb", "float", "torque", "model", "rounding")  # regressor side, then torque side
 # the inertial columns' radii by origin (``parts`` of the equation): M(q) within the step, Coriolis + gravity at the
@@ -440,7 +440,7 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     col = ni
     eye = np.arange(nj)
     k_sum = float(np.sum(K1))
-    for kind in robot._extras:  # same order as SerialRobot.extra_columns
+    for kind in [k for k in ("fv", "fs", "Ia", "off") if f"{k}1" in robot.names]:  # SerialRobot.extra_columns order
         cols = col + eye
         if kind == "fv":
             Wc[:, eye, cols] = Fqd
@@ -573,49 +573,3 @@ def check_motion_bounds(q, spec: ErrorSpec, span: int = 20, position_error=None)
     d2 = (q[2 * span:] - 2 * q[span:-span] + q[:-2 * span]) / h**2
     qdd_lo = np.max(np.abs(d2) - (e[2 * span:] + 2 * e[span:-span] + e[:-2 * span]) / h**2, axis=0)
     return SpecCheck(np.maximum(qd_lo, 0.0), np.maximum(qdd_lo, 0.0), spec.qd_max.copy(), spec.qdd_max.copy())
-
-
-# ---------------------------------------------------------------------------------------------- the hull
-def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1):
-    """Oettli-Prager hull (:func:`ident.estimators.uncertain.uncertain_hull`) for a prior of any signs.
-
-    The exact set ``{theta in Q : |y - Wc theta| <= bound + D |theta|}`` is not convex when a parameter's
-    interval contains 0; ``|theta_j|`` is replaced by its chord over ``[lo_j, hi_j]`` (an upper bound, exact
-    when the interval has one sign), which makes the set a polytope containing the exact one. Columns with
-    ``|hi_j| < |lo_j|`` are negated first so every chord slope ``s_j`` is in [0, 1]; with ``theta = lo + phi``,
-    ``phi >= 0``, the system is Oettli-Prager's on ``phi`` with radius ``D diag(s)``, torques ``y - Wc lo``
-    (enclosed, its radius added to the bound) and bound ``bound + D |lo|``: uncertain_hull's form. Slopes and
-    products are rounded up, so the set can only grow. ``refine`` times, the box found becomes the prior (the
-    truth lies in it), which shortens the chords. Returns an :class:`ident.Box` with ``info['refinements']``.
-    """
-    from h4bench.ident import Box
-    from h4bench.ident.estimators.uncertain import uncertain_hull
-    from h4bench.ident.numerics.interval import point_matvec
-
-    Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
-    lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
-    names = prior.names
-    box = None
-    for it in range(int(refine) + 1):
-        flip = np.abs(hi) < np.abs(lo)
-        sg = np.where(flip, -1.0, 1.0)
-        W1, lo1, hi1 = Wc * sg, np.where(flip, -hi, lo), np.where(flip, -lo, hi)  # exact: sign changes only
-        width = up(hi1 - lo1)
-        slope = np.where(width > 0, up((np.abs(hi1) - np.abs(lo1)) / np.where(width > 0, down(hi1 - lo1), 1.0)),
-                         0.0)
-        slope = np.clip(slope, 0.0, 1.0)
-        D1 = up(D * slope)
-        plo, phi_ = point_matvec(W1, lo1, lo1)  # enclosure of Wc lo
-        y2lo, y2hi = np.nextafter(y - phi_, -np.inf), np.nextafter(y - plo, np.inf)
-        y2 = 0.5 * y2lo + 0.5 * y2hi
-        extra = up(up(y2hi - y2lo) + up(D @ np.abs(lo1)) * (1 + 4 * Wc.shape[1] * 2.0**-53))
-        b2 = up(np.asarray(bound, dtype=float) + extra)
-        sub = uncertain_hull(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names))
-        lo_f = np.nextafter(lo1 + sub.lower, -np.inf)
-        hi_f = np.nextafter(lo1 + sub.upper, np.inf)
-        new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))
-        new_hi = np.minimum(hi, np.where(flip, -lo_f, hi_f))
-        box = Box(new_lo, new_hi, names=names, info={**sub.info, "refinements": it})
-        lo, hi = new_lo, new_hi
-    return box
-

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from h4bench import ident
+from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
 from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.processing.weakform import make_kernel
 from h4bench.ident.robots import tx40
@@ -22,7 +23,6 @@ from h4bench.ident.robots.serial_certified import (
     certified_equation,
     check_motion_bounds,
     geometry_bounds,
-    signed_uncertain_hull,
 )
 
 DT = 1e-3
