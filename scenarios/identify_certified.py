@@ -5,7 +5,8 @@ resolution or significant digits, torque timing, torque error, stated qd_max and
 replaces ``--bound``: the derived interval equation (:mod:`ident.robots.serial_certified`) of the whole log,
 the Oettli-Prager hull in the physical prior (as ``--urdf`` documents), the stated motion bounds checked
 against the data, and the term that dominates the radii. An optional ``[certified]`` table sets the kernel:
-``window`` [s] (default 0.08: a triangle over that many seconds) and ``stride`` [s] (default 0.02).
+``window`` [s] (default 0.08: a triangle over that many seconds), ``stride`` [s] (default 0.02) and ``refine``
+(default 3: rounds of the hull with the last box as prior, :func:`ident.estimators.uncertain_signed.signed_uncertain_hull`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_
 __all__ = ["KERNEL_DEFAULTS", "identify_urdf_spec", "read_kernel"]
 
 KERNEL_DEFAULTS = {"window": 0.08, "stride": 0.02, "refine": 3}
+REFINE_RTOL = 0.02  # stop refining when the widths' geometric mean shrank by less than this in a round
 
 
 def read_kernel(spec_path) -> dict:
@@ -94,7 +96,8 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     }
     t1 = time.perf_counter()
     try:
-        box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]))
+        box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]),
+                                    rtol=REFINE_RTOL)
     except ident.InconsistentDataError as exc:
         box = None
         scale = getattr(exc, "scale_lower", None)

@@ -22,7 +22,10 @@ __all__ = ["DEFAULTS", "certify", "error_spec", "report_lines"]
 
 # [tx40.certified] and [tx40.error_model]: every entry a sensor fact or a stated assumption, with its source
 DEFAULTS = {
-    "certified": {"half_width": 200, "stride": 100, "max_samples": 0, "torque_sweep": [0.5, 1.0, 2.0], "refine": 3},
+    # refine: at most that many rounds of the hull with the last box as prior, until the widths' geometric mean
+    # shrinks by less than refine_rtol; the sweep runs from the largest factor down, each from the box before
+    "certified": {"half_width": 200, "stride": 100, "max_samples": 0, "torque_sweep": [0.5, 1.0, 2.0], "refine": 8,
+                  "refine_rtol": 0.02},
     "error_model": {
         "sample_period": 2e-4, "significant_digits": 5, "torque_timing": "sample",
         "torque_error": [3.96, 3.96, 3.1, 1.38, 1.3, 0.92],
@@ -79,12 +82,12 @@ def _coverage(eq, box, bound):
     return float(np.mean(inside)), [float(np.mean(inside[eq.joint == j])) for j in range(6)]
 
 
-def _hull(eq, bound, prior, refine):
+def _hull(eq, bound, prior, refine, rtol):
     from h4bench.ident import InconsistentDataError
     from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
 
     try:
-        return signed_uncertain_hull(eq.Wc, eq.D, eq.y, bound, prior, refine=refine), None
+        return signed_uncertain_hull(eq.Wc, eq.D, eq.y, bound, prior, refine=refine, rtol=rtol), None
     except InconsistentDataError as exc:
         return None, str(exc)
 
@@ -118,22 +121,25 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
                                progress=lambda i, n: progress("certified equation", n + i, 2 * n), **kw)
     t_eq = time.perf_counter() - t0
     prior = ident.Box(s.blo, s.bhi, names=s.base.names)
-    refine = int(cc["refine"])
+    refine, rtol = int(cc["refine"]), float(cc["refine_rtol"])
     sweep = {}
     box1 = None
     t1 = time.perf_counter()
-    for f in cc["torque_sweep"]:
+    start = prior  # a smaller torque error gives a subset of the larger one's set: its box is a valid prior
+    for f in sorted(cc["torque_sweep"], reverse=True):
         bound = eq.bound + (float(f) - 1.0) * eq.terms["torque"]
         bound_ho = eq_ho.bound + (float(f) - 1.0) * eq_ho.terms["torque"]
-        box, msg = _hull(eq, bound, prior, refine)
+        box, msg = _hull(eq, bound, start, refine, rtol)
         if box is None:
             sweep[f"{f:g}"] = {"status": "inconsistent", "message": msg}
             continue
+        start = box
         rel = box.width / (s.bhi - s.blo)
         cov, cov_j = _coverage(eq_ho, box, bound_ho)
         sweep[f"{f:g}"] = {"status": "ok", "relative_width_to_prior_median": float(np.median(rel)),
                            "relative_width_to_prior_geomean": float(np.exp(np.mean(np.log(np.maximum(rel, 1e-300))))),
-                           "narrowed_parameters": int(np.sum(rel < 0.99)), "heldout_coverage": cov}
+                           "narrowed_parameters": int(np.sum(rel < 0.99)), "heldout_coverage": cov,
+                           "refinements": box.info.get("refinements")}
         if float(f) == 1.0:
             box1, cov1, cov1_j = box, cov, cov_j
     t_hull = time.perf_counter() - t1

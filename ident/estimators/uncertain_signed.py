@@ -17,7 +17,7 @@ from h4bench.ident.numerics.interval import down, point_matvec, up
 __all__ = ["signed_uncertain_hull"]
 
 
-def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1):
+def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: float = 0.0):
     """Oettli-Prager hull (:func:`ident.estimators.uncertain.uncertain_hull`) for a prior of any signs.
 
     The exact set ``{theta in Q : |y - Wc theta| <= bound + D |theta|}`` is not convex when a parameter's
@@ -26,8 +26,10 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1):
     ``|hi_j| < |lo_j|`` are negated first so every chord slope ``s_j`` is in [0, 1]; with ``theta = lo + phi``,
     ``phi >= 0``, the system is Oettli-Prager's on ``phi`` with radius ``D diag(s)``, torques ``y - Wc lo``
     (enclosed, its radius added to the bound) and bound ``bound + D |lo|``: uncertain_hull's form. Slopes and
-    products are rounded up, so the set can only grow. ``refine`` times, the box found becomes the prior (the
-    truth lies in it), which shortens the chords. Returns an :class:`ident.Box` with ``info['refinements']``.
+    products are rounded up, so the set can only grow. Up to ``refine`` times, the box found becomes the prior
+    (the truth lies in it), which shortens the chords; it stops earlier when the geometric mean of the widths
+    shrank by less than ``rtol`` (relative) in the last round. Returns an :class:`ident.Box` with
+    ``info['refinements']`` (the rounds done).
     """
     Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
     lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
@@ -53,5 +55,10 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1):
         new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))
         new_hi = np.minimum(hi, np.where(flip, -lo_f, hi_f))
         box = Box(new_lo, new_hi, names=names, info={**sub.info, "refinements": it})
+        w_old, w_new = hi - lo, new_hi - new_lo
+        pos = (w_old > 0) & (w_new > 0)
+        shrink = 1.0 - float(np.exp(np.mean(np.log(w_new[pos] / w_old[pos])))) if np.any(pos) else 0.0
         lo, hi = new_lo, new_hi
+        if it > 0 and shrink < rtol:
+            break
     return box
