@@ -300,6 +300,9 @@ def identify(
     bound: Optional[str] = typer.Option(None, help="bound on |tau - W theta| for every raw sample [N m]: one "
                                         "number, 4 (n) comma-separated numbers (joints 1..4 (n)) or, H4 only, a "
                                         ".toml/.csv file (required unless --spec)"),
+    spec: Optional[Path] = typer.Option(None, help="an error specification (TOML [error_model], optional "
+                                        "[certified]) instead of --bound: the certified box of the derived "
+                                        "interval equation (the H4, or with --urdf any serial robot)"),
     urdf: Optional[Path] = typer.Option(None, help="a serial robot's URDF: identify its base parameters in a "
                                         "physical prior (--mass, --reach) instead of the H4's 14"),
     mass: Optional[str] = typer.Option(None, help="--urdf: total mass of the prior [kg] (default 2 x the URDF's)"),
@@ -327,8 +330,6 @@ def identify(
     as_json: bool = typer.Option(False, "--json", help="print result.json (the only output on stdout)"),
     pairs: Optional[str] = typer.Option(None, help="the feasible set's projections onto pairs, feasible_set.png: "
                                         "auto (the most coupled) or NAME:NAME,... (e.g. Fv1:Fs1,Imot1:Mnac)"),
-    spec: Optional[Path] = typer.Option(None, help="--urdf: an error specification (TOML [error_model]) instead "
-                                        "of --bound: the certified box of the derived interval equation"),
 ) -> None:
     """The estimators on a user's own data; prints the table (or result.json) and writes result.json.
 
@@ -346,11 +347,14 @@ def identify(
         except ValueError:
             raise OptionError(f"--method must be one of {' | '.join(METHODS)} (or an estimator plugin), "
                               f"got {method!r}") from None
-        if spec is not None:
+        if spec is not None and urdf is None:
+            result = _identify_h4_spec(file, spec, bound, method, prior, prior_lower, prior_upper, model, out,
+                                       torque_timing, pairs)
+        elif spec is not None:
             result = _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset,
                                     coupled_wrist, cutoff_hz, decimation, prior, model, out, pairs, torque_timing)
         elif bound is None:
-            raise OptionError("--bound is required (or --spec FILE with --urdf), got neither")
+            raise OptionError("--bound is required (or --spec FILE for the certified box), got neither")
         elif urdf is not None:
             if torque_timing != "hold":
                 raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
@@ -402,11 +406,10 @@ def identify(
 
 def _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
                    decimation, prior, model, out, pairs, torque_timing) -> dict:
-    """``--spec``: the certified box (:mod:`scenarios.identify_certified`); options of the tuned path are refused."""
+    """``--urdf ... --spec``: the certified box of a serial robot (:mod:`scenarios.identify_serial_certified`); options
+    of the tuned path are refused."""
     from h4bench.scenarios.identify import OptionError, parse_number
 
-    if urdf is None:
-        raise OptionError(f"--spec needs --urdf (the H4's certified identify is not available here), got --spec {spec}")
     for name, value in (("--bound", bound), ("--method", None if method == "hull" else method),
                         ("--cutoff-hz", None if cutoff_hz == "100" else cutoff_hz),
                         ("--decimation", None if decimation == "100" else decimation), ("--prior", prior),
@@ -416,7 +419,7 @@ def _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor
             raise OptionError(f"{name} does not apply with --spec (the bound, the processing and the torque timing "
                               f"come from the spec file; the box is the certified one), got {name} {value}")
     n = _urdf_joints(urdf)
-    from h4bench.scenarios.identify_certified import identify_urdf_spec
+    from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
 
     return identify_urdf_spec(file, urdf, spec,
                               mass=None if mass is None else parse_number(mass, "--mass", positive=True),
@@ -479,6 +482,21 @@ def _coupled_wrist(coupled_wrist, n: int):
     if len(wrist) != 2 or wrist[0] == wrist[1] or not all(0 <= j < n for j in wrist):
         raise OptionError(f"--coupled-wrist must be two distinct joints A,B in 1..{n}, got {coupled_wrist!r}")
     return wrist
+
+
+def _identify_h4_spec(file, spec, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing,
+                      pairs) -> dict:
+    from h4bench.scenarios.identify import OptionError, load_prior, parse_number
+    from h4bench.scenarios.identify_certified import identify_certified_csv
+
+    for name, value in (("--bound", bound), ("--method", None if method == "hull" else method),
+                        ("--torque-timing", None if torque_timing == "hold" else torque_timing), ("--pairs", pairs)):
+        if value is not None:
+            raise OptionError(f"{name} does not apply with --spec (the certified box rests on the specification "
+                              f"alone, torques held over each step), got {name} {value}")
+    lo, hi = parse_number(prior_lower, "--prior-lower"), parse_number(prior_upper, "--prior-upper")
+    box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
+    return identify_certified_csv(file, spec, box, model=model, out=out)
 
 
 def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing="hold",

@@ -1,126 +1,90 @@
-"""``h4bench identify log.csv --urdf ROBOT.urdf --spec spec.toml``: the certified box of any serial robot's log.
+"""``h4bench identify LOG.csv --spec SPEC.toml`` for the H4: the certified box of a user's log.
 
-The spec file's ``[error_model]`` table (:class:`ident.processing.errorspec.ErrorSpec`: sample period, position
-resolution or significant digits, torque timing, torque error, stated qd_max and qdd_max, model error, sources)
-replaces ``--bound``: the derived interval equation (:mod:`ident.robots.serial_certified`) of the whole log,
-the Oettli-Prager hull in the physical prior (as ``--urdf`` documents), the stated motion bounds checked
-against the data, and the term that dominates the radii. An optional ``[certified]`` table sets the kernel:
-``window`` [s] (default 0.08: a triangle over that many seconds), ``stride`` [s] (default 0.02) and ``refine``
-(default 3: rounds of the hull with the last box as prior, :func:`ident.estimators.uncertain_signed.signed_uncertain_hull`).
+SPEC.toml holds the ``[error_model]`` table of :class:`~ident.processing.errorspec.ErrorSpec` (sensor facts and
+stated motion bounds, with an optional ``[error_model.sources]``) and optionally a ``[certified]`` table with the
+weak form's processing (``kernel_steps``, ``kernel_shape``, ``stride``, ``curvature_every``; defaults of
+:class:`~ident.robots.h4_certified.Processing`). No bound and no allowance: the interval equation's radii come
+from the specification only (:mod:`ident.robots.h4_certified`), and the box is the registry's ``certified``
+estimator. ``result.json`` carries the specification (``error_model``) and what it rests on unproven
+(``certified.not_proven``).
 """
 
 from __future__ import annotations
 
-import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from h4bench import ident
-from h4bench.scenarios.identify import OptionError, read_serial_log, urdf_robot_and_prior
+from h4bench import ident, sim
+from h4bench.ident.processing.errorspec import ErrorSpec
+from h4bench.ident.robots.h4_certified import Processing, certified_equation
+from h4bench.scenarios import judging
 from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 
-__all__ = ["KERNEL_DEFAULTS", "identify_urdf_spec", "read_kernel"]
+__all__ = ["identify_certified_csv", "read_processing"]
 
-KERNEL_DEFAULTS = {"window": 0.08, "stride": 0.02, "refine": 3}
-REFINE_RTOL = 0.02  # stop refining when the widths' geometric mean shrank by less than this in a round
+_PROCESSING_KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "curvature_every": int}
 
 
-def read_kernel(spec_path) -> dict:
-    """The optional ``[certified]`` table of the spec file (``window``, ``stride`` [s], ``refine``); errors name
-    ``--spec`` and the file."""
-    path = Path(spec_path)
+def read_processing(path) -> Processing:
+    """The optional ``[certified]`` table of a spec file (errors name the file and the key)."""
+    from h4bench.scenarios.identify import OptionError
+
     try:
-        table = tomllib.loads(path.read_text()).get("certified", {})
+        data = tomllib.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise OptionError(f"--spec {path}: cannot read it as TOML ({exc})") from None
-    if not isinstance(table, dict) or set(table) - set(KERNEL_DEFAULTS):
-        raise OptionError(f"--spec {path} [certified]: expected some of {sorted(KERNEL_DEFAULTS)}, got "
-                          f"{sorted(table) if isinstance(table, dict) else table!r}")
-    out = {**KERNEL_DEFAULTS, **table}
-    for k in ("window", "stride"):
-        v = out[k]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-            raise OptionError(f"--spec {path} [certified].{k} must be a number > 0 [s], got {v!r}")
-    if isinstance(out["refine"], bool) or not isinstance(out["refine"], int) or out["refine"] < 0:
-        raise OptionError(f"--spec {path} [certified].refine must be an integer >= 0, got {out['refine']!r}")
-    return out
+    table = data.get("certified", {})
+    if not isinstance(table, dict):
+        raise OptionError(f"--spec {path}: [certified] must be a table, got {type(table).__name__}")
+    unknown = set(table) - set(_PROCESSING_KEYS)
+    if unknown:
+        raise OptionError(f"--spec {path}: [certified] has unknown keys {sorted(unknown)}; expected some of "
+                          f"{sorted(_PROCESSING_KEYS)}")
+    for key, value in table.items():
+        kind = _PROCESSING_KEYS[key]
+        if isinstance(value, bool) or not isinstance(value, kind):
+            raise OptionError(f"--spec {path}: [certified] {key} must be {kind.__name__}, got {value!r}")
+    return Processing(**table)
 
 
-def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction: bool = True,
-                       rotor_inertia: bool = True, offset: bool = True, coupled_wrist=None, out=None) -> dict:
-    """The certified box of a joint-side CSV log (``t, q1..qn, tau1..taun``) of the serial robot ``urdf`` under the
-    error specification ``spec_path``; writes ``result.json`` into ``out``. Returns the result dict
-    (``methods.certified``, ``error_model``, ``certified``; ``consistent`` False when the data contradict the
-    spec: the hull's set is proven empty)."""
-    from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
-    from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
-    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds
+def identify_certified_csv(path, spec_path, prior=(0.0, 2.0), model=None, out=None) -> dict:
+    """The certified box of the H4 log ``path`` (CSV ``t,q1..q4,tau1..tau4``) under the specification file
+    ``spec_path``; writes ``result.json`` into ``out`` (default ``runs/identify-<stem>``) and returns it.
 
-    t0 = time.perf_counter()
-    robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,
-                                                   offset=offset, coupled_wrist=coupled_wrist)
-    nj = robot.n_joints
-    spec_path = Path(spec_path)
-    if not spec_path.is_file():
-        raise OptionError(f"--spec must name an existing TOML file, got {str(spec_path)!r} (not found)")
-    try:
-        spec = ErrorSpec.from_toml(spec_path, nj)
-    except ErrorSpecError as exc:
-        msg = str(exc)
-        raise OptionError(msg if msg.startswith("--spec") else f"--spec {spec_path}: {msg}") from None
-    kernel = read_kernel(spec_path)
+    prior : (lower, upper) numbers, (14,) arrays or a Box (lower >= 0: the Oettli-Prager polytope form).
+    A log whose sample period differs from the specification's, or proven inconsistent with it, is reported:
+    the first as a ValueError naming both periods, the second as ``consistent: false`` (status inconsistent).
+    """
+    from h4bench.scenarios.identify import OptionError, _prior_box
+
+    error_spec = ErrorSpec.from_toml(spec_path, 4)
+    processing = read_processing(spec_path)
+    box_prior = _prior_box(prior)
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
-    q, tau, dt = read_serial_log(path, nj)
-    if abs(dt - spec.sample_period) > 1e-3 * spec.sample_period:
-        raise OptionError(f"--spec {spec_path}: sample_period = {spec.sample_period:g} s, but the log {str(path)!r} "
-                          f"is sampled every {dt:g} s")
-    H = max(2, int(round(kernel["window"] / dt / 2)))
-    stride = max(1, int(round(kernel["stride"] / dt)))
-    try:
-        eq = certified_equation(robot, base, q, tau, spec, half_width=H, stride=stride)
-    except ValueError as exc:
-        raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None
-    check = check_motion_bounds(q, spec, span=3)
-    prior = ident.Box(np.asarray(prior_info["lower"]), np.asarray(prior_info["upper"]), names=base.names)
-    entry: dict = {"kind": "guaranteed", "rigorous": True}
+    dataset = sim.Dataset.from_csv(path)
+    if abs(dataset.dt - error_spec.sample_period) > 1e-6 * error_spec.sample_period:
+        raise OptionError(f"--spec {spec_path}: sample_period {error_spec.sample_period:g} s must be the log's "
+                          f"sample period, got {dataset.dt:g} s in {path}")
+    geometry = sim.H4Geometry.from_model(sim.load_model(model))
+    ceq = certified_equation(geometry, dataset.q, dataset.tau, error_spec, processing)
+    outcomes, _ = judging.run_methods(["certified"], ceq.Wc, ceq.y, ceq.bound, box_prior,
+                                      {"regressor_radius": ceq.D, "groups": ceq.joint.astype(np.int64)})
+    entry = judging.judge(outcomes, None, None, list(ceq.names))
+    o = outcomes["certified"]
+    if o.status == "inconsistent":
+        entry["certified"].update(error=type(o.error).__name__, min_bound=getattr(o.error, "min_bound", None),
+                                  scale_lower=getattr(o.error, "scale_lower", None))
     result = {
-        "scenario": f"identify-{Path(path).stem}", "kind": "identify", "robot": str(urdf), "source": str(path),
-        "samples": int(q.shape[0]), "dt": dt, "joints": list(robot.joint_names), "parameters": list(base.names),
-        "parameter_expressions": list(base.expressions), "parameter_units": list(base.units),
-        "standard_parameters": list(robot.names), "true": None, "rows": len(eq), "prior": prior_info,
-        "error_model": {**spec.to_dict(), "file": str(spec_path)}, "consistent": None,
-        "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,
-                            "singular_gap": base.singular_gap},
-    }
-    t1 = time.perf_counter()
-    try:
-        box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]),
-                                    rtol=REFINE_RTOL)
-    except ident.InconsistentDataError as exc:
-        box = None
-        scale = getattr(exc, "scale_lower", None)
-        entry.update(status="inconsistent", message=str(exc), error=type(exc).__name__, scale_lower=scale)
-        result["consistent"] = False
-        result["inconsistency"] = {"scale_lower": scale, "min_bound": None if scale is None else
-                                   float(scale * np.max(eq.bound))}
-    if box is not None:
-        result["consistent"] = True
-        rel = box.width / (prior.upper - prior.lower)
-        entry.update(status="ok", lower=box.lower.tolist(), upper=box.upper.tolist(), width=box.width.tolist(),
-                     relative_width_to_prior=rel.tolist(), narrowed_parameters=int(np.sum(rel < 0.99)),
-                     info={k: box.info.get(k) for k in ("nonempty_proven", "refinements", "lp_solves")})
-    entry["seconds"] = time.perf_counter() - t1
-    theta_abs = (np.maximum(np.abs(box.lower), np.abs(box.upper)) if box is not None
-                 else np.maximum(np.abs(prior.lower), np.abs(prior.upper)))
-    result["methods"] = {"certified": entry}
-    result["certified"] = {
-        "rows": len(eq), "kernel": {k: eq.info[k] for k in ("kernel", "half_width", "stride", "window_seconds",
-                                                             "secant_half_span")},
-        "geometry": eq.info["geometry"], **eq.summary(theta_abs),
-        "terms_at": "|theta| = the certified box's largest magnitudes (the prior's when the set is empty)",
-        "spec_check": check.to_dict(), "seconds": {"equation": eq.info["seconds"], "total": time.perf_counter() - t0},
+        "scenario": f"identify-{Path(path).stem}", "kind": "identify", "seed": None,
+        "model": str(model or sim.DEFAULT_MODEL_PATH), "source": str(path), "samples": len(dataset),
+        "parameters": list(ident.PARAMETER_NAMES), "true": None, "bound": None,
+        "bound_processed": float(ceq.bound.max()), "rows": len(ceq), "oracle_residual": None,
+        "consistent": {"ok": True, "inconsistent": False}.get(o.status),
+        "prior": {"lower": box_prior.lower.tolist(), "upper": box_prior.upper.tolist()},
+        "methods": entry, "error_model": error_spec.to_dict(), "certified": ceq.info,
+        "certified_terms_max": {k: float(np.max(v)) for k, v in ceq.terms.items()},
     }
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         write_json(tmp / "result.json", result)

@@ -29,6 +29,7 @@ from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.processing.weakform import (coulomb_columns, imot_columns, make_kernel, nonlinear_columns,
                                                row_windows, torque_rows, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
+from h4bench.ident.robots.h4_interval import IntervalEquation
 
 __all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "Processing", "certified_equation", "curvature_bounds",
            "nacelle_terms"]
@@ -49,33 +50,25 @@ class Processing:
 
 
 @dataclass(frozen=True)
-class CertifiedEquation:
+class CertifiedEquation(IntervalEquation):
     """``y in [Wc - D, Wc + D] theta + [-bound, bound]`` row by row (rows ``4 r + i``: window r, joint i).
 
     Wc, D (m, 14); y, bound (m,) [N m]; sample (m,) the centre sample of each row's window; joint (m,);
-    terms: the radii by origin, ``torque``, ``model``, ``rounding`` (m,) [N m] and ``measurement``,
-    ``second_order``, ``truncation``, ``sign`` (m, 14) (units of W); D is the sum of the four matrices, bound
-    the sum of the three vectors."""
+    names the columns; terms: the radii by origin, ``torque``, ``model``, ``rounding`` (m,) [N m] and
+    ``measurement``, ``second_order``, ``truncation``, ``sign`` (m, 14) (units of W); D is the sum of the four
+    matrices, bound the sum of the three vectors; info: the settings and what is not proven."""
 
-    Wc: np.ndarray
-    D: np.ndarray
-    y: np.ndarray
-    bound: np.ndarray
-    sample: np.ndarray
-    joint: np.ndarray
-    names: tuple
-    terms: dict
-    info: dict = field(default_factory=dict)
-
-    def __len__(self) -> int:
-        return self.y.size
+    names: tuple = PARAMETER_NAMES
+    terms: dict = field(default_factory=dict, compare=False)
 
 
-def nacelle_terms(geometry, q, qd):
-    """P, F (S, 4, 2) of the Mnac and Ibc columns at states q, qd (S, 4) (module docstring)."""
+def nacelle_terms(geometry, q, qd, x=None, x0=None):
+    """P, F (S, 4, 2) of the Mnac and Ibc columns at states q, qd (S, 4) (module docstring); x (S, 4) the nacelle
+    poses of q if known, else forward kinematics started at x0 (S, 4) (default the home pose)."""
     from h4bench.sim.kinematics import _jacobian_dot, _jacobians, forward_kinematics  # noqa: PLC0415
 
-    x = np.atleast_2d(forward_kinematics(geometry, q))
+    if x is None:
+        x = np.atleast_2d(forward_kinematics(geometry, q, x0=x0))
     jac = _jacobians(geometry, q, x)
     jd = _jacobian_dot(geometry, jac, qd)
     J = jac.J
@@ -96,6 +89,8 @@ def curvature_bounds(geometry, q, h: float, every: int = 10, factor: float = CUR
     ``x = (q, qd)``: central second differences at every ``every``-th secant state of the measured positions
     q (n, 4); each step takes the maximum over the sampled states within two sampling intervals of it, times
     ``factor``. NOT a proof (module docstring)."""
+    from h4bench.sim.kinematics import forward_kinematics  # noqa: PLC0415
+
     S = q.shape[0] - 1
     idx = np.unique(np.append(np.arange(0, S, every), S - 1))
     qm = 0.5 * (q[:-1] + q[1:])[idx]
@@ -103,8 +98,11 @@ def curvature_bounds(geometry, q, h: float, every: int = 10, factor: float = CUR
     x0 = np.concatenate([qm, v], axis=1)
     d = np.concatenate([np.full(4, steps[0]), np.full(4, steps[1])])
 
-    def ev(x):
-        return nacelle_terms(geometry, x[:, :4], x[:, 4:])
+    pose = np.atleast_2d(forward_kinematics(geometry, x0[:, :4]))
+
+    def ev(x):  # the base pose when q is not perturbed, else a warm start from it
+        same = np.array_equal(x[:, :4], x0[:, :4])
+        return nacelle_terms(geometry, x[:, :4], x[:, 4:], x=pose if same else None, x0=None if same else pose)
 
     MP = np.zeros((idx.size, 4, 2, 8, 8))
     MF = np.zeros_like(MP)
@@ -134,6 +132,8 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     position_error : (n, 4) bounds of the position error [rad]; default ``spec.position_error(q)`` (0 gives the
     equation of exact positions, used by the certificate to check the truncation terms alone).
     """
+    from h4bench.sim.kinematics import forward_kinematics  # noqa: PLC0415
+
     processing = processing or Processing()
     q = np.asarray(q, dtype=float)
     tau = np.asarray(tau, dtype=float)
@@ -167,8 +167,14 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
             cols["measurement"][:, joint, offset + joint] = r1
             cols["truncation"][:, joint, offset + joint] = r2
     curv = curvature_bounds(geometry, q, h, every=processing.curvature_every)
-    value, meas, trunc, second = nonlinear_columns(lambda a, b: nacelle_terms(geometry, a, b), q, e, windows,
-                                                   kernel, spec.qd_max, spec.qdd_max, curv)
+    qm = 0.5 * (q[:-1] + q[1:])
+    pose = np.atleast_2d(forward_kinematics(geometry, qm))
+
+    def evaluate(a, b):  # the secant poses when q_m is not perturbed, else a warm start from them
+        same = np.array_equal(a, qm)
+        return nacelle_terms(geometry, a, b, x=pose if same else None, x0=None if same else pose)
+
+    value, meas, trunc, second = nonlinear_columns(evaluate, q, e, windows, kernel, spec.qd_max, spec.qdd_max, curv)
     cols["value"][..., 4:6] = value
     cols["measurement"][..., 4:6] = meas
     cols["truncation"][..., 4:6] = trunc
@@ -192,5 +198,5 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
                            f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds",
                            "gradients of the Mnac, Ibc per-step functions by central differences"]}
     return CertifiedEquation(Wc=cols["value"].reshape(m, p), D=D, y=y.reshape(m), bound=bound,
-                             sample=np.repeat(windows.centre, N_JOINTS), joint=np.tile(joint, R),
-                             names=PARAMETER_NAMES, terms=terms, info=info)
+                             sample=np.repeat(windows.centre, N_JOINTS), joint=np.tile(joint, R), info=info,
+                             names=PARAMETER_NAMES, terms=terms)

@@ -290,7 +290,8 @@ class _Steps:
 
 
 def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int, stride: int,
-                       first_sample: int = 0, position_error=None, progress=None) -> CertifiedEquation:
+                       first_sample: int = 0, position_error=None, progress=None,
+                       kernel_shape: str = "triangle") -> CertifiedEquation:
     """The derived interval equation (module docstring) of a serial robot's log.
 
     Parameters
@@ -299,7 +300,9 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     base : its :class:`ident.robots.serial.BaseParameters`
     q : (N, n) measured joint positions [rad]; tau : (N, n) logged joint torques [N m]
     spec : :class:`ErrorSpec` of the log (n joints, ``sample_period`` the log's step)
-    half_width : H, kernel half-width [steps] (window ``2 H`` steps); stride : row spacing [steps]
+    half_width : H, kernel half-width [steps] (window ``2 H`` steps); stride : row spacing [steps];
+    kernel_shape : ``"triangle"`` or ``"hann"`` (:func:`ident.processing.weakform.make_kernel`; the radii hold for
+    any kernel linear between the samples, >= 0, zero at both ends)
     first_sample : index of q[0] in the whole log (for ``window``)
     position_error : (N, n) bound on ``|q - q_true|`` [rad], default ``spec.position_error(q)`` (give it when
         the resolution applies on another side, e.g. motor angles mapped to the joints)
@@ -335,7 +338,7 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     st_ = _Steps(robot, geo, q, e, dt, spec.qd_max, spec.qdd_max, m)
     qddm = spec.qdd_max
     L = 2 * H
-    kern = make_kernel(L, dt, "triangle")
+    kern = make_kernel(L, dt, kernel_shape)
     k = kern.knots  # (L+1,) at the window's samples [1/s], int k = 1
     K1 = kern.integrals  # int_step k, k >= 0
     kp = np.diff(k) / dt  # (L,) slopes [1/s^2]
@@ -494,7 +497,7 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     D = up(up(up(terms["position"] + terms["motion"]) + terms["coulomb"]) + terms["float"])
     bound = up(up(terms["torque"] + terms["model"]) + terms["rounding"])
     window = np.repeat(np.stack([starts, starts + L], axis=1) + int(first_sample), nj, axis=0)
-    info = {"kernel": "triangle", "half_width": H, "stride": stride, "window_seconds": L * dt, "secant_half_span": m,
+    info = {"kernel": kernel_shape, "half_width": H, "stride": stride, "window_seconds": L * dt, "secant_half_span": m,
             "rows": int(R_ * nj), "windows": int(R_), "geometry": geo, "samples": int(N),
             "coulomb_uncertain_share": float(np.mean(r_sign > 0)) if r_sign.size else 0.0,
             "seconds": time.perf_counter() - t0}

@@ -2,6 +2,7 @@
 motion or the encoder error is caught by the truth); no allowance is read."""
 
 import copy
+import json
 import dataclasses
 
 import numpy as np
@@ -42,6 +43,12 @@ def test_certified_box_encloses_and_the_certificate_holds_without_an_allowance(r
     assert entry["status"] == "ok" and entry["all_enclosed"]
     assert "allowance" not in out["error_model"] and cert["motion_bounds"]["held"]
     assert cert["terms"]["torque"] == pytest.approx(run_.noise_bound, rel=1e-12)  # kernel of unit integral
+    # every key the certified path adds is documented in docs/results.md (section `certified`)
+    from tests.test_docs import documented
+
+    doc = documented("`certified`")
+    keys = {f"certificate.{k}" for k in cert} | {"error_model", "width_vs_tuned", "width_vs_tuned_geomean"}
+    assert keys <= set(doc), sorted(keys - set(doc))
 
 
 def test_certificate_catches_an_understated_spec(run_and_spec):
@@ -79,3 +86,56 @@ def test_derived_error_model_is_refused_where_it_is_not_built(tmp_path):
         run_scenario("structure", quick=True, out=tmp_path / "s", error_model="derived")
     with pytest.raises(ScenarioError, match="error_model must be 'tuned' or 'derived'"):
         run_scenario("paper", quick=True, out=tmp_path / "p", error_model="guessed")
+
+
+def test_identify_with_a_spec_gives_the_certified_box(run_and_spec, tmp_path):
+    """`h4bench identify LOG --spec SPEC.toml` on a simulated log: the certified box encloses the simulator's
+    truth (read here only to check), result.json carries the specification; --bound with --spec is refused."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    run_, spec = run_and_spec
+    ds, n = run_.dataset, 1500
+    log = tmp_path / "log.csv"
+    np.savetxt(log, np.column_stack([ds.t[:n], ds.q[:n], ds.tau[:n]]), delimiter=",", comments="", fmt="%.17g",
+               header="t,q1,q2,q3,q4,tau1,tau2,tau3,tau4")
+    es = simulated_error_spec(spec, run_.reference, ds.dt, run_.noise_bound)
+    spec_file = tmp_path / "spec.toml"
+    spec_file.write_text(
+        "[error_model]\nsample_period = 0.001\ncounts_per_turn = 20000\n"
+        f"torque_error = {run_.noise_bound!r}\nqd_max = {es.qd_max.tolist()}\nqdd_max = {es.qdd_max.tolist()}\n"
+        "[error_model.sources]\ntorque_error = 'the simulator: the injected error bound'\n"
+        "[certified]\nkernel_steps = 100\ncurvature_every = 20\n")
+    res = CliRunner().invoke(app, ["identify", str(log), "--spec", str(spec_file), "--out", str(tmp_path / "o"),
+                                   "--json"])
+    assert res.exit_code == 0, res.output
+    result = json.loads(res.stdout)
+    m = result["methods"]["certified"]
+    assert m["status"] == "ok" and result["bound"] is None
+    assert np.all(np.asarray(m["lower"]) <= run_.theta_true) and np.all(run_.theta_true <= np.asarray(m["upper"]))
+    assert result["error_model"]["sources"]["torque_error"].startswith("the simulator")
+    assert json.loads((tmp_path / "o" / "result.json").read_text())["rows"] == result["rows"] > 0
+    bad = CliRunner().invoke(app, ["identify", str(log), "--spec", str(spec_file), "--bound", "1.5",
+                                   "--out", str(tmp_path / "p")])
+    assert bad.exit_code == 2 and "--bound does not apply with --spec" in bad.output
+
+
+@pytest.mark.slow
+def test_run_certified_quick_json(tmp_path):
+    """`h4bench run certified --quick --json`: one JSON document with the certificate (rows > 0, 0 violations,
+    margin >= 0, each term's radius), the error model, the certified method enclosing the truth beside the tuned
+    hull, and the width ratio."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    res = CliRunner().invoke(app, ["run", "certified", "--quick", "--json", "--out", str(tmp_path / "c")])
+    assert res.exit_code == 0, res.output
+    r = json.loads(res.stdout)
+    c = r["certificate"]
+    assert c["rows"] > 0 and c["violations"] == 0 and c["min_margin"] >= 0
+    assert set(c["terms"]) == {"torque", "model", "rounding", "measurement", "second_order", "truncation", "sign"}
+    assert r["error_model"]["position_resolution"] == [2 * np.pi / 20000] * 4
+    assert r["methods"]["certified"]["all_enclosed"] and r["methods"]["hull"]["status"] == "ok"
+    assert 0 < r["width_vs_tuned_geomean"] <= 1.5

@@ -50,8 +50,8 @@ qdd_max = {[float(v) for v in spec.qdd_max]}
 torque_error = "the synthetic log's square-wave amplitude"
 
 [certified]
-window = 0.08
-stride = 0.04
+kernel_steps = 80
+stride = 40
 """)
     return csv, toml, robot.base(200, 0).from_standard(theta), d
 
@@ -79,7 +79,9 @@ def test_identify_spec_encloses_the_truth(synthetic_csv):
      "sample_period"),
     ([], "[error_model]\nsample_period = 0.001\ntorque_error = 1\nqd_max = 1\nqdd_max = 1\n", "position_resolution"),
     ([], "[error_model]\nsample_period = 0.001\ncounts_per_turn = 1000\ntorque_error = 1\nqd_max = 1\n"
-         "qdd_max = 1\n[certified]\nwidth = 1\n", "[certified]"),
+         "qdd_max = 1\n[certified]\ncurvature_every = 10\n", "[certified]"),
+    ([], "[error_model]\nsample_period = 0.001\ncounts_per_turn = 1000\ntorque_error = 1\nqd_max = 1\n"
+         "qdd_max = 1\n[certified]\nkernel_steps = 81\n", "kernel_steps"),
 ])
 def test_identify_spec_errors_name_the_option_and_file(synthetic_csv, tmp_path, extra, spec_text, word):
     csv, toml, _, _ = synthetic_csv
@@ -94,10 +96,8 @@ def test_identify_spec_errors_name_the_option_and_file(synthetic_csv, tmp_path, 
         assert str(toml) in res.output
 
 
-def test_spec_needs_urdf_and_bound_needs_spec(synthetic_csv, tmp_path):
-    csv, toml, _, _ = synthetic_csv
-    res = CliRunner().invoke(app, ["identify", str(csv), "--spec", str(toml)])
-    assert res.exit_code == 2 and "--spec needs --urdf" in res.output
+def test_bound_or_spec_is_required(synthetic_csv):
+    csv, _, _, _ = synthetic_csv
     res = CliRunner().invoke(app, ["identify", str(csv), "--urdf", URDF])
     assert res.exit_code == 2 and "--bound is required" in res.output
 
