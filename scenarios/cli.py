@@ -223,7 +223,8 @@ def run(
                                           "spec's [estimators] methods"),
     runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
     error_model: str = typer.Option("tuned", help="tuned (the spec's bound) or derived (enclosure: add the "
-                                    "certified box from the [error_model] table and check its certificate)"),
+                                    "certified box from the [error_model] table and check its certificate; tx40: "
+                                    "add the certified box under [tx40.error_model])"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd)."""
     from h4bench.scenarios.campaign import CampaignInterrupted
