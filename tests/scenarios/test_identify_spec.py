@@ -52,6 +52,7 @@ torque_error = "the synthetic log's square-wave amplitude"
 [certified]
 kernel_steps = 80
 stride = 40
+refine = 1
 """)
     return csv, toml, robot.base(200, 0).from_standard(theta), d
 
