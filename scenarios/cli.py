@@ -228,7 +228,8 @@ def run(
     method_timeout: Optional[float] = typer.Option(None, help="seconds each estimator may run per run (default: no "
                                                    "limit); a method over it is failed: timeout"),
     error_model: str = typer.Option("tuned", help="tuned (the spec's bound) or derived (enclosure: add the "
-                                    "certified box from the [error_model] table and check its certificate)"),
+                                    "certified box from the [error_model] table and check its certificate; tx40: "
+                                    "add the certified box under [tx40.error_model])"),
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd).
 
@@ -336,9 +337,9 @@ def identify(
     bound: Optional[str] = typer.Option(None, help="bound on |tau - W theta| for every raw sample [N m]: one "
                                         "number, 4 (n) comma-separated numbers (joints 1..4 (n)) or, H4 only, a "
                                         ".toml/.csv file (required unless --spec)"),
-    spec: Optional[Path] = typer.Option(None, help="H4: an error specification (TOML [error_model], optional "
-                                        "[certified]): the certified box from the derived interval equation, "
-                                        "instead of --bound"),
+    spec: Optional[Path] = typer.Option(None, help="an error specification (TOML [error_model], optional "
+                                        "[certified]) instead of --bound: the certified box of the derived "
+                                        "interval equation (the H4, or with --urdf any serial robot)"),
     urdf: Optional[Path] = typer.Option(None, help="a serial robot's URDF: identify its base parameters in a "
                                         "physical prior (--mass, --reach) instead of the H4's 14"),
     mass: Optional[str] = typer.Option(None, help="--urdf: total mass of the prior [kg] (default 2 x the URDF's)"),
@@ -393,8 +394,11 @@ def identify(
         if spec is not None and urdf is None:
             result = _identify_h4_spec(file, spec, bound, method, prior, prior_lower, prior_upper, model, out,
                                        torque_timing, pairs)
+        elif spec is not None:
+            result = _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset,
+                                    coupled_wrist, cutoff_hz, decimation, prior, model, out, pairs, torque_timing)
         elif bound is None:
-            raise OptionError("--bound is required (or --spec FILE for the H4's certified box), got neither")
+            raise OptionError("--bound is required (or --spec FILE for the certified box), got neither")
         elif urdf is not None:
             if torque_timing != "hold":
                 raise OptionError("--torque-timing applies to the H4 path (the --urdf processing evaluates the "
@@ -419,12 +423,18 @@ def identify(
         if result.get("parameter_expressions"):
             import textwrap
 
-            typer.echo(f"min consistent bound / ||h||_1 (raw rows, approximate): "
-                       f"{result['min_consistent_bound_raw']:.4g} N m")
+            if "min_consistent_bound_raw" in result:
+                typer.echo(f"min consistent bound / ||h||_1 (raw rows, approximate): "
+                           f"{result['min_consistent_bound_raw']:.4g} N m")
+            if "certified" in result:
+                c = result["certified"]
+                typer.echo(f"certified: {c['rows']} rows, dominant term {c['dominant']}; stated motion bounds "
+                           + ("contradicted: " + "; ".join(c["spec_check"]["contradicted"])
+                              if c["spec_check"]["contradicted"] else "not contradicted by the data"))
             typer.echo("base parameters (base <- standard):")
             for n, e in zip(result["parameters"], result["parameter_expressions"]):
                 typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
-    if result.get("kind") == "identify" and not as_json:
+    if result.get("kind") == "identify" and not as_json and "certified" not in result:
         typer.echo("narrower-than-hull check: " + _verdict(result))
     if result.get("consistent") is False:
         typer.secho(f"error: the data are inconsistent with the bound (proven); {_smallest_bound(result)}",
@@ -482,6 +492,30 @@ def _exit_if_failed(result: dict, code: int) -> None:
         raise typer.Exit(code)
 
 
+def _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
+                   decimation, prior, model, out, pairs, torque_timing) -> dict:
+    """``--urdf ... --spec``: the certified box of a serial robot (:mod:`scenarios.identify_serial_certified`); options
+    of the tuned path are refused."""
+    from h4bench.scenarios.identify import OptionError, parse_number
+
+    for name, value in (("--bound", bound), ("--method", None if method == "hull" else method),
+                        ("--cutoff-hz", None if cutoff_hz == "100" else cutoff_hz),
+                        ("--decimation", None if decimation == "100" else decimation), ("--prior", prior),
+                        ("--model", model), ("--pairs", pairs),
+                        ("--torque-timing", None if torque_timing == "hold" else torque_timing)):
+        if value is not None:
+            raise OptionError(f"{name} does not apply with --spec (the bound, the processing and the torque timing "
+                              f"come from the spec file; the box is the certified one), got {name} {value}")
+    n = _urdf_joints(urdf)
+    from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
+
+    return identify_urdf_spec(file, urdf, spec,
+                              mass=None if mass is None else parse_number(mass, "--mass", positive=True),
+                              reach=None if reach is None else parse_number(reach, "--reach", positive=True),
+                              friction=friction, rotor_inertia=rotor, offset=offset,
+                              coupled_wrist=_coupled_wrist(coupled_wrist, n), out=out)
+
+
 def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
                    decimation, prior, model, out, pairs=None, timeout=None) -> dict:
     from h4bench.scenarios.identify import OptionError, identify_urdf_csv, parse_joint_bound, parse_number
@@ -490,29 +524,8 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         if value is not None:
             raise OptionError(f"{name} is for the H4; with --urdf the prior is physical (--mass, --reach), got "
                               f"{name} {value}")
-    if not Path(urdf).is_file():
-        raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
-    from h4bench.ident.robots.serial import SerialRobot
-
-    native: list = []
-    try:
-        with native_stderr_captured(native):
-            n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints
-    except (ValueError, RuntimeError) as exc:
-        said = " ".join(" ".join(native).split())
-        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}"
-                          + (f" (parser: {said})" if said else "")) from None
-    if "".join(native).strip():
-        sys.stderr.write("".join(native))
-    wrist = None
-    if coupled_wrist is not None:
-        parts = str(coupled_wrist).split(",")
-        try:
-            wrist = tuple(int(x) - 1 for x in parts)
-        except ValueError:
-            wrist = ()
-        if len(wrist) != 2 or wrist[0] == wrist[1] or not all(0 <= j < n for j in wrist):
-            raise OptionError(f"--coupled-wrist must be two distinct joints A,B in 1..{n}, got {coupled_wrist!r}")
+    n = _urdf_joints(urdf)
+    wrist = _coupled_wrist(coupled_wrist, n)
     dec = parse_number(decimation, "--decimation", positive=True)
     if dec != int(dec):
         raise OptionError(f"--decimation must be an integer >= 1, got {decimation!r}")
@@ -523,6 +536,41 @@ def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offs
         friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=wrist,
         cutoff_hz=parse_number(cutoff_hz, "--cutoff-hz", positive=True), decimation=int(dec), out=out, pairs=pairs,
         timeout=timeout)
+
+
+def _urdf_joints(urdf) -> int:
+    """The number of joints of ``--urdf`` (the parser's own messages on stderr); OptionError names the option."""
+    from h4bench.ident.robots.serial import SerialRobot
+    from h4bench.scenarios.identify import OptionError
+
+    if not Path(urdf).is_file():
+        raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
+    native: list = []
+    try:
+        with native_stderr_captured(native):
+            n = SerialRobot(urdf, friction=False, rotor_inertia=False, offset=False).n_joints
+    except (ValueError, RuntimeError) as exc:
+        said = " ".join(" ".join(native).split())
+        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}"
+                          + (f" (parser: {said})" if said else "")) from None
+    if "".join(native).strip():
+        sys.stderr.write("".join(native))
+    return n
+
+
+def _coupled_wrist(coupled_wrist, n: int):
+    """``--coupled-wrist A,B`` (1-based) -> 0-based (a, b) or None; OptionError names the option."""
+    from h4bench.scenarios.identify import OptionError
+
+    if coupled_wrist is None:
+        return None
+    try:
+        wrist = tuple(int(x) - 1 for x in str(coupled_wrist).split(","))
+    except ValueError:
+        wrist = ()
+    if len(wrist) != 2 or wrist[0] == wrist[1] or not all(0 <= j < n for j in wrist):
+        raise OptionError(f"--coupled-wrist must be two distinct joints A,B in 1..{n}, got {coupled_wrist!r}")
+    return wrist
 
 
 def _identify_h4_spec(file, spec, bound, method, prior, prior_lower, prior_upper, model, out, torque_timing,

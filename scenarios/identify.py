@@ -304,6 +304,39 @@ def read_serial_log(path, n_joints: int) -> tuple[np.ndarray, np.ndarray, float]
     return q, tau, dt
 
 
+def urdf_robot_and_prior(urdf, mass=None, reach=None, *, friction: bool = True, rotor_inertia: bool = True,
+                         offset: bool = True, coupled_wrist=None, rotor_inertia_max: float | None = None):
+    """The serial robot of ``--urdf``, its base parameters and their physical prior (as :func:`identify_urdf_csv`
+    documents). Returns (robot, base, prior dict: ``lower``, ``upper`` (base, lists), the standard box, the total
+    mass, reach, rotor bound, offset fraction and the source)."""
+    from h4bench.ident.robots.serial import SerialRobot, default_reach, physical_prior
+
+    urdf = Path(urdf)
+    if not urdf.is_file():
+        raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
+    try:
+        robot = SerialRobot(urdf, friction=friction, rotor_inertia=rotor_inertia, offset=offset,
+                            coupled_wrist=coupled_wrist)
+    except (ValueError, RuntimeError) as exc:
+        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}") from None
+    import pinocchio  # present: SerialRobot was built
+
+    urdf_mass = float(pinocchio.computeTotalMass(robot.model))
+    M = MASS_FACTOR * urdf_mass if mass is None else parse_number(mass, "--mass", positive=True)
+    r = default_reach(robot) if reach is None else parse_number(reach, "--reach", positive=True)
+    if not M > 0:
+        raise OptionError(f"--mass must be given when the URDF's total mass is 0, got the URDF mass {urdf_mass:g} kg")
+    p = URDF_PROCESSING
+    base = robot.base(int(p["base_samples"]), int(p["seed"]))
+    lo_s, hi_s = physical_prior(robot, M, r, rotor_inertia_max=rotor_inertia_max, offset_fraction=OFFSET_FRACTION)
+    blo, bhi = base.box_from_standard(lo_s, hi_s)
+    info = {"lower": blo.tolist(), "upper": bhi.tolist(), "standard_lower": lo_s.tolist(),
+            "standard_upper": hi_s.tolist(), "total_mass": M, "urdf_mass": urdf_mass, "reach": r,
+            "rotor_inertia_max": rotor_inertia_max, "offset_fraction": OFFSET_FRACTION,
+            "source": "h4bench.ident.robots.serial.physical_prior mapped by the base-parameter matrix"}
+    return robot, base, info
+
+
 def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | None = None,
                       reach: float | None = None, friction: bool = True, rotor_inertia: bool = True,
                       offset: bool = True, coupled_wrist: tuple[int, int] | None = None,
@@ -325,18 +358,13 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     ``cutoff_hz`` [Hz] and ``decimation``. Returns the result dict; data proven inconsistent with the bound give
     ``result["consistent"] = False`` (and the method's ``min_bound``), not an exception.
     """
-    from h4bench.ident.robots.serial import SerialRobot, default_reach, physical_prior, process
+    from h4bench.ident.robots.serial import process
 
     check_method(method)
-    urdf = Path(urdf)
-    if not urdf.is_file():
-        raise OptionError(f"--urdf must name an existing URDF file, got {str(urdf)!r} (not found)")
-    try:
-        robot = SerialRobot(urdf, friction=friction, rotor_inertia=rotor_inertia, offset=offset,
-                            coupled_wrist=coupled_wrist)
-    except (ValueError, RuntimeError) as exc:
-        raise OptionError(f"--urdf {str(urdf)!r} is not a usable serial robot: {exc}") from None
-    nj = robot.n_joints
+    robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,
+                                                   offset=offset, coupled_wrist=coupled_wrist,
+                                                   rotor_inertia_max=rotor_inertia_max)
+    urdf, nj = Path(urdf), robot.n_joints
     b = np.asarray(bound, dtype=float)
     b = np.full(nj, float(b)) if b.ndim == 0 else b
     if b.shape != (nj,) or not np.all(np.isfinite(b) & (b > 0)):
@@ -346,19 +374,10 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
     if isinstance(decimation, bool) or int(decimation) != decimation or decimation < 1:
         raise OptionError(f"--decimation must be an integer >= 1, got {decimation!r}")
     decimation = int(decimation)
-    import pinocchio  # present: SerialRobot was built
-
-    urdf_mass = float(pinocchio.computeTotalMass(robot.model))
-    M = MASS_FACTOR * urdf_mass if mass is None else parse_number(mass, "--mass", positive=True)
-    r = default_reach(robot) if reach is None else parse_number(reach, "--reach", positive=True)
-    if not M > 0:
-        raise OptionError(f"--mass must be given when the URDF's total mass is 0, got the URDF mass {urdf_mass:g} kg")
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
     q, tau, dt = read_serial_log(path, nj)
     p = URDF_PROCESSING
-    base = robot.base(int(p["base_samples"]), int(p["seed"]))
-    lo_s, hi_s = physical_prior(robot, M, r, rotor_inertia_max=rotor_inertia_max, offset_fraction=OFFSET_FRACTION)
-    blo, bhi = base.box_from_standard(lo_s, hi_s)
+    blo, bhi = np.asarray(prior_info["lower"]), np.asarray(prior_info["upper"])
     prior = ident.Box(blo, bhi, names=base.names)
     settings = {"cutoff_hz": cutoff_hz, "decimation": decimation,
                 "numtaps": int(p["numtaps_per_decimation"]) * decimation + 1, "fir_cutoff": p["fir_cutoff"],
@@ -383,10 +402,7 @@ def identify_urdf_csv(path, urdf, bound, method: str = "hull", *, mass: float | 
                        "filter_l1_norm": eq.gain,
                        **{k: v for k, v in eq.info.items() if isinstance(v, (int, float, bool))}},
         "oracle_residual": None, "consistent": None,
-        "prior": {"lower": blo.tolist(), "upper": bhi.tolist(), "standard_lower": lo_s.tolist(),
-                  "standard_upper": hi_s.tolist(), "total_mass": M, "urdf_mass": urdf_mass, "reach": r,
-                  "rotor_inertia_max": rotor_inertia_max, "offset_fraction": OFFSET_FRACTION,
-                  "source": "h4bench.ident.robots.serial.physical_prior mapped by the base-parameter matrix"},
+        "prior": prior_info,
         # processed rows [N m]; divided by ||h||_1: the raw-row scalar bound it corresponds to (approximately)
         "min_consistent_bound": t_min, "min_consistent_bound_raw": t_min / eq.gain,
         "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,

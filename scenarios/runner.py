@@ -42,15 +42,16 @@ def run_scenario(name: str | Path, seed: int | None = None, model: str | Path | 
     recomputes its runs); runs : a campaign's number of runs (``campaign.runs``); method_timeout : seconds each
     estimator may run (``[estimators] method_timeout``; None: no limit); error_model : ``"tuned"``
     (the spec's bound) or ``"derived"`` (the enclosure campaign adds the ``certified`` box and its certificate,
-    :mod:`scenarios.certificate`; the ``certified`` kind always derives it).
+    :mod:`scenarios.certificate`; the ``certified`` kind always derives it; ``tx40`` adds the certified box of
+    the real log, :mod:`scenarios.tx40_certified`).
     """
     spec = registry.load_spec(name, quick=quick)
     if error_model not in ("tuned", "derived"):
         raise ScenarioError(f"error_model must be 'tuned' or 'derived', got {error_model!r}")
     if error_model == "derived":
-        if spec["kind"] not in ("enclosure", "certified"):
-            raise ScenarioError(f"--error-model derived is available for the kinds enclosure and certified, got "
-                                f"kind {spec['kind']!r}")
+        if spec["kind"] not in ("enclosure", "certified", "tx40"):
+            raise ScenarioError(f"--error-model derived is available for the kinds enclosure, certified and tx40, "
+                                f"got kind {spec['kind']!r}")
         spec["certified"]["enabled"] = True
     if methods is not None:
         from h4bench.scenarios.judging import parse_methods

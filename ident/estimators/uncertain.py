@@ -38,12 +38,11 @@ from h4bench.ident.errors import InconsistentDataError
 from h4bench.ident.estimators.enclosure import Verdict, decide_and_enclose
 from h4bench.ident.estimators.checks import check_bound, check_finite, check_prior, real_array
 from h4bench.ident.estimators.estimate import least_squares_center
-from h4bench.ident.estimators.registry import declare
 from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, interval_hull, strip_bounds
 from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
 from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
 
-__all__ = ["certified", "uncertain_hull"]
+__all__ = ["uncertain_hull"]
 
 
 # ----------------------------------------------------------------------------------------------- checks
@@ -191,21 +190,3 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     lower, upper = np.clip(res.lower, lo, hi), np.clip(res.upper, lo, hi)
     info["seconds"] = time.perf_counter() - t0
     return Box(lower=lower, upper=upper, names=names, info=info)
-
-
-@declare(kind="guaranteed", rigorous=True, context=("regressor_radius",),
-         description="the Oettli-Prager hull of an interval regressor [W - r, W + r] (context key regressor_radius)",
-         citation="W. Oettli, W. Prager, Compatibility of approximate solution of linear equations with given error "
-                  "bounds for coefficients and right-hand sides, Numer. Math. 6:405-409, 1964")
-def certified(W, y, bound, prior, regressor_radius=None) -> Box:
-    """The registry's ``certified`` estimator: :func:`uncertain_hull` on the interval equation
-    ``y in [W - regressor_radius, W + regressor_radius] theta + [-bound, bound]``.
-
-    regressor_radius : (N, p) >= 0, the radius of each regressor entry (e.g. the derived interval equation of
-    :mod:`ident.robots.h4_certified`), passed by the registry as a context keyword; required.
-    """
-    if regressor_radius is None:
-        raise ValueError("certified needs regressor_radius, the (N, p) radius of the interval regressor (a context "
-                         "keyword of ident.estimators.registry.call), got None")
-    return uncertain_hull(W, regressor_radius, y, bound, prior)
-

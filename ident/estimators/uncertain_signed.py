@@ -1,0 +1,64 @@
+"""The Oettli-Prager hull for a prior of any signs (:func:`signed_uncertain_hull`).
+
+:func:`ident.estimators.uncertain.uncertain_hull` needs ``theta >= 0`` (its polytope form); a robot's base
+parameters (first moments, offsets, products of inertia) have both signs. The chord of ``|theta_j|`` over the
+prior interval (an upper bound, exact for one-signed intervals) makes the set a polytope containing the exact
+Oettli-Prager set, in uncertain_hull's form after a shift and sign changes (docstring below).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from h4bench.ident.box import Box
+from h4bench.ident.estimators.uncertain import uncertain_hull
+from h4bench.ident.numerics.interval import down, point_matvec, up
+
+__all__ = ["signed_uncertain_hull"]
+
+
+def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: float = 0.0):
+    """Oettli-Prager hull (:func:`ident.estimators.uncertain.uncertain_hull`) for a prior of any signs.
+
+    The exact set ``{theta in Q : |y - Wc theta| <= bound + D |theta|}`` is not convex when a parameter's
+    interval contains 0; ``|theta_j|`` is replaced by its chord over ``[lo_j, hi_j]`` (an upper bound, exact
+    when the interval has one sign), which makes the set a polytope containing the exact one. Columns with
+    ``|hi_j| < |lo_j|`` are negated first so every chord slope ``s_j`` is in [0, 1]; with ``theta = lo + phi``,
+    ``phi >= 0``, the system is Oettli-Prager's on ``phi`` with radius ``D diag(s)``, torques ``y - Wc lo``
+    (enclosed, its radius added to the bound) and bound ``bound + D |lo|``: uncertain_hull's form. Slopes and
+    products are rounded up, so the set can only grow. Up to ``refine`` times, the box found becomes the prior
+    (the truth lies in it), which shortens the chords; it stops earlier when the geometric mean of the widths
+    shrank by less than ``rtol`` (relative) in the last round. Returns an :class:`ident.Box` with
+    ``info['refinements']`` (the rounds done).
+    """
+    Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
+    lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
+    names = prior.names
+    box = None
+    for it in range(int(refine) + 1):
+        flip = np.abs(hi) < np.abs(lo)
+        sg = np.where(flip, -1.0, 1.0)
+        W1, lo1, hi1 = Wc * sg, np.where(flip, -hi, lo), np.where(flip, -lo, hi)  # exact: sign changes only
+        width = up(hi1 - lo1)
+        slope = np.where(width > 0, up((np.abs(hi1) - np.abs(lo1)) / np.where(width > 0, down(hi1 - lo1), 1.0)),
+                         0.0)
+        slope = np.clip(slope, 0.0, 1.0)
+        D1 = up(D * slope)
+        plo, phi_ = point_matvec(W1, lo1, lo1)  # enclosure of Wc lo
+        y2lo, y2hi = np.nextafter(y - phi_, -np.inf), np.nextafter(y - plo, np.inf)
+        y2 = 0.5 * y2lo + 0.5 * y2hi
+        extra = up(up(y2hi - y2lo) + up(D @ np.abs(lo1)) * (1 + 4 * Wc.shape[1] * 2.0**-53))
+        b2 = up(np.asarray(bound, dtype=float) + extra)
+        sub = uncertain_hull(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names))
+        lo_f = np.nextafter(lo1 + sub.lower, -np.inf)
+        hi_f = np.nextafter(lo1 + sub.upper, np.inf)
+        new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))
+        new_hi = np.minimum(hi, np.where(flip, -lo_f, hi_f))
+        box = Box(new_lo, new_hi, names=names, info={**sub.info, "refinements": it})
+        w_old, w_new = hi - lo, new_hi - new_lo
+        pos = (w_old > 0) & (w_new > 0)
+        shrink = 1.0 - float(np.exp(np.mean(np.log(w_new[pos] / w_old[pos])))) if np.any(pos) else 0.0
+        lo, hi = new_lo, new_hi
+        if it > 0 and shrink < rtol:
+            break
+    return box

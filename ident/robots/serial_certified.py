@@ -1,0 +1,578 @@
+"""The derived interval equation of a serial robot: weak-form rows whose radii follow from an :class:`ErrorSpec`.
+
+**The equation.** A row r applies a kernel ``k_r(t)`` (a triangle over ``2 H`` sample steps, piecewise linear
+between the sample instants, zero at both window ends, ``int k = 1`` so rows are in N m) to both sides of
+``tau = Y(q, qd, qdd) theta + e``:  ``int k tau dt = (int k Y dt) theta + int k e dt``. The torque side is a
+weighted sum of the logged torques; the regressor side ``[Wc - D, Wc + D]`` encloses the TRUE row ``int k Y dt``
+(of the true, unknown motion), so the true parameters satisfy ``|y - W theta| <= bound`` for some W in it.
+
+**The regressor side**, per sample step j (``q_j`` the true positions at the sample instants, ``M(q)`` the mass
+matrix, ``h(q, v)`` the Coriolis/centrifugal and ``g(q)`` the gravity torques, all per unit standard parameter;
+``Y = M qdd + h + g``):
+
+* ``int k M(q) qdd``: on each step M is replaced by ``M_j = M(qbar_j)`` (mid-step position), then
+  ``int_step k qdd`` is integrated by parts; summed over the window (``k = 0`` at both ends) this is exactly
+  ``sum_j M_j (k_{j+1} qd_{j+1} - k_j qd_j - k'_j dq_j)``: the true positions' steps ``dq_j`` enter exactly,
+  the speeds only through the DIFFERENCES of M between neighbouring steps (a Coriolis-like term);
+* ``int k (h + g)``: ``int_step |k|`` times the integrand at the mid-step position and a speed estimate;
+* friction, rotor inertia, offsets: ``int k qdd = -sum k'_j dq_j`` (exact), ``int k qd = -int k' q``
+  (trapezoid, error ``qdd_max dt^3 / 12`` per step), ``int k = 1``; Coulomb ``sign(qd)`` per step: certain when
+  the step's speed bound excludes 0, else ``[-1, 1] int_step |k|``.
+
+The computed row uses the measured positions; speeds are centred secants over ``2 m`` steps (``m`` chosen from
+the spec to balance ``qdd_max m dt`` against ``e / (m dt)``). **Radii** (each term in :attr:`terms`):
+
+``position``  the encoder/format error e (``ErrorSpec.position_error``) through the exact gradient of the row's
+              discrete functional (summation by parts: ``sum_j e_j |G_j|``, ``G_j`` from ``k'_{j-1} - k'_j``;
+              no jerk bound), its effect on M and h through the Lipschitz bounds below;
+``motion``    within-step variation of the configuration (``qd_max dt / 2``), of the speed (``qdd_max``), the
+              secants' truncation (``qdd_max m dt / 2``), the trapezoid, all from the stated ``qd_max``,
+              ``qdd_max``;
+``coulomb``   sign uncertainty of steps whose speed bound includes 0;
+``torque``    ``torque_error int|k|`` (+ ``torque_rate dt / 2`` for sample-instant torques, + ``torque_rate
+              latency``), ``model``: ``model_error``; ``rounding``: floating-point allowance.
+
+**Rigour of the configuration-dependent bounds** (proven, from the URDF geometry): for a chain of revolute
+joints every entry of ``M(q)`` per unit standard parameter of link i is ``J_a^T I_c J_b`` (body Jacobian columns,
+``|J_a| <= sqrt(1 + R^2)`` with R the sum of the joint-placement offsets: the distance of any link origin from
+any joint axis before it; the unit-parameter spatial inertia ``I_c`` has 2-norm 1), so ``|M| <= 1 + R^2``; it is
+a trigonometric polynomial of degree <= 2 in each joint angle (each angle enters one rotation of each Jacobian
+column), so Bernstein's inequality gives ``|dM/dq_k| <= 2 (1 + R^2)``. The Christoffel symbols are sums of three
+halves of such derivatives: ``|Gamma| <= 3 (1 + R^2)``, hence ``|h| <= 3 (1 + R^2) (sum|v|)^2``, ``|dh/dv_a|
+<= 6 (1 + R^2) sum|v|`` and (Bernstein again) ``|dh/dq_k| <= 6 (1 + R^2) (sum|v|)^2``; gravity
+``|g| <= |g0| sqrt(1 + R^2)``, ``|dg/dq_k| <= 2 |g0| sqrt(1 + R^2)``. These are global (any configuration), hence
+loose, but they only multiply ``dt``, e and the speed-estimate error. Columns of link i vanish on the rows of
+joints after i (structural zeros keep radius 0). **Stated, not proven**: pinocchio's floating-point error
+(taken below ``1e-12`` of the magnitudes summed, in ``rounding``), and the spec's own assumptions (the motion
+bounds, the torque error, the inter-sample torque for sample timing without a ``torque_rate``: within
+``torque_error`` of the interpolation of the samples).
+
+Base parameters: the rows of the standard regressor satisfy the structural dependences exactly (every
+evaluation is one of the regressor's), so the base columns are the independent standard ones and their radii
+are the standard columns' radii.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from h4bench.ident.numerics.interval import up
+from h4bench.ident.processing.errorspec import ErrorSpec
+from h4bench.ident.processing.weakform import (
+    RowWindows,
+    coulomb_columns,
+    imot_columns,
+    make_kernel,
+    torque_rows,
+    viscous_columns,
+)
+
+__all__ = ["CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "check_motion_bounds",
+           "geometry_bounds", "secant_span"]
+
+TERMS = ("position", "motion", "coulomb", "float", "torque", "model", "rounding")  # regressor side, then torque side
+# the inertial columns' radii by origin (``parts`` of the equation): M(q) within the step, Coriolis + gravity at the
+# mid-step estimate, the speed estimate in the differences of M, and the measurement's exact gradient
+PARTS = ("mass_motion", "coriolis_motion", "speed_motion", "mass_position", "coriolis_position", "speed_position",
+         "gradient_position")
+_PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
+
+
+# ------------------------------------------------------------------------------------------------ geometry
+def geometry_bounds(robot) -> dict:
+    """The proven global bounds of the module docstring for a chain of revolute joints.
+
+    Returns dict ``R`` [m], ``M`` (|M| per unit parameter), ``dM`` (|dM/dq_k|), ``gamma`` (|Christoffel|),
+    ``g``, ``dg`` (gravity and its derivative per unit parameter). Raises ValueError for a non-revolute joint
+    (Bernstein's inequality needs the angle to enter through cos/sin).
+    """
+    model = robot.model
+    for i in range(1, model.njoints):
+        short = model.joints[i].shortname()
+        if "Revolute" not in short and not short.startswith("JointModelR"):
+            raise ValueError(f"robot must have revolute joints only for the certified equation, joint {i} is {short}")
+    R = sum(float(np.linalg.norm(model.jointPlacements[i].translation)) for i in range(1, model.njoints))
+    m_bar = float(up(1.0 + R * R))
+    g0 = float(np.linalg.norm(np.asarray(model.gravity.linear)))
+    g_bar = float(up(g0 * math.sqrt(1.0 + R * R) * (1 + 1e-15)))
+    return {"R": R, "M": m_bar, "dM": 2.0 * m_bar, "gamma": 3.0 * m_bar, "g": g_bar, "dg": 2.0 * g_bar}
+
+
+def secant_span(spec: ErrorSpec, e_typ: float, cap: int = 50) -> int:
+    """Half-span m [steps] of the speed secants: minimises ``qdd_max m dt / 2 + e / (m dt)``, at most ``cap``."""
+    qdd = float(np.max(spec.qdd_max))
+    if qdd <= 0:
+        return cap
+    return int(min(cap, max(1, round(math.sqrt(2.0 * e_typ / qdd) / spec.sample_period))))
+
+
+# ------------------------------------------------------------------------------------------------ equation
+@dataclass(frozen=True)
+class CertifiedEquation:
+    """Interval equation ``y = W theta + e``, ``W in [Wc - D, Wc + D]``, ``|e| <= bound`` (base columns).
+
+    Wc, D : (m, r); y, bound : (m,) [N m]; joint : (m,) 0-based; window : (m, 2) first and last sample;
+    names : (r,); terms : name -> radius array ((m, r) regressor-side, (m,) torque-side) that sum to D and bound;
+    parts : the inertial columns' position and motion radii by origin (:data:`PARTS`), (m, r) each;
+    info : the kernel, the secant span, the geometry bounds, counts.
+    """
+
+    Wc: np.ndarray
+    D: np.ndarray
+    y: np.ndarray
+    bound: np.ndarray
+    joint: np.ndarray
+    window: np.ndarray
+    names: tuple[str, ...]
+    terms: dict
+    parts: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return self.y.size
+
+    def row_radius(self, theta_abs) -> dict:
+        """Per term the (m,) row radius at ``|theta| <= theta_abs`` (r,) [N m]: ``D_term |theta|`` or the
+        torque-side term; with ``total``."""
+        t = np.abs(np.asarray(theta_abs, dtype=float))
+        out = {k: v @ t if v.ndim == 2 else v for k, v in self.terms.items()}
+        out["total"] = self.bound + self.D @ t
+        return out
+
+    def summary(self, theta_abs) -> dict:
+        """JSON-ready radii at ``|theta| <= theta_abs``: ``terms`` (per term the ``max``, ``median`` row radius
+        [N m] and its ``share`` of the summed radii), ``parts`` (the inertial parts' ``max``, ``median``),
+        ``dominant`` (the term of largest share), ``radius_median_per_joint`` [N m]."""
+        t = np.abs(np.asarray(theta_abs, dtype=float))
+        rr = self.row_radius(t)
+        total = rr.pop("total")
+        summed = sum(float(np.sum(v)) for v in rr.values()) or 1.0
+        terms = {k: {"max": float(np.max(v)), "median": float(np.median(v)), "share": float(np.sum(v)) / summed}
+                 for k, v in rr.items()}
+        parts = {k: {"max": float(np.max(v @ t)), "median": float(np.median(v @ t))} for k, v in self.parts.items()}
+        nj = int(self.joint.max()) + 1
+        return {"terms": terms, "parts": parts, "dominant": max(terms, key=lambda k: terms[k]["share"]),
+                "radius_median_per_joint": [float(np.median(total[self.joint == j])) for j in range(nj)]}
+
+
+def _mid(x):
+    return 0.5 * (x[:-1] + x[1:])
+
+
+class _Steps:
+    """Per-step local data at the measured mid-step position ``qh`` and speed estimate ``vh`` (pinocchio
+    evaluations, cached): the gravity columns, the mass-matrix columns, and the radii aggregates per row entry
+    (n rows, pi inertial columns) of the module docstring's local bounds. Step j spans ``[t_j, t_j+1]``; the
+    sample-instant aggregates of sample j use steps j-1 and j."""
+
+    ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded below)
+
+    def __init__(self, robot, geo, q, e, dt, qdm, qddm, m):
+        self.robot, self.geo, self.q, self.e, self.dt, self.qdm, self.qddm, self.m = robot, geo, q, e, dt, qdm, qddm, m
+        n = robot.n_joints
+        N = q.shape[0]
+        self.n, self.N = n, N
+        self.S = (2 * m - 1) * dt
+        self.qbar, self.ebar, self.dq = _mid(q), _mid(e), np.diff(q, axis=0)
+        self.vh = np.full((N - 1, n), np.nan)
+        js = np.arange(m - 1, N - m)
+        self.vh[js] = (q[js + m] - q[js + 1 - m]) / self.S
+        self.ev_pos = np.full((N - 1, n), np.inf)
+        self.ev_pos[js] = (e[js + m] + e[js + 1 - m]) / self.S
+        self.ev_mot_max = qddm * (dt / 2 + self.S / 4)  # max over the step of |qd(t) - qd_true secant|
+        self.ev_mot_mean = qddm * (dt / 4 + self.S / 4)  # its k-weighted mean over the step
+        self.w = np.full((N, n), np.nan)
+        ks = np.arange(m, N - m)
+        self.w[ks] = (q[ks + m] - q[ks - m]) / (2 * m * dt)
+        self.ew_mot = qddm * (m * dt / 2)
+        self.ew_pos = np.full((N, n), np.inf)
+        self.ew_pos[ks] = (e[ks + m] + e[ks - m]) / (2 * m * dt)
+        self.cache: dict = {}
+
+    def evict(self, below: int) -> None:
+        for j in [j for j in self.cache if j < below]:
+            del self.cache[j]
+
+    def get(self, j: int) -> dict:
+        if j not in self.cache:
+            self.cache[j] = self._compute(j)
+        return self.cache[j]
+
+    def _compute(self, j: int, with_prev: bool = True) -> dict:  # noqa: PLR0915 - one derivation, kept in one place
+        import pinocchio as pin
+
+        model, data, n, geo = self.robot.model, self.robot.data, self.n, self.geo
+        eta, dt = self.ETA, self.dt
+        qh, vh = self.qbar[j], self.vh[j]
+        Z = np.zeros(n)
+        I = np.eye(n)
+
+        def Y(qq, v, a):
+            return pin.computeJointTorqueRegressor(model, data, qq, v, a).copy()
+
+        g0 = Y(qh, Z, Z)
+        f0 = Y(qh, vh, Z)
+        ha = np.stack([Y(qh, I[a], Z) - g0 for a in range(n)])
+        gam = np.zeros((n, n) + g0.shape)
+        for a in range(n):
+            gam[a, a] = ha[a]
+            for b in range(a + 1, n):
+                gam[a, b] = gam[b, a] = 0.5 * (Y(qh, I[a] + I[b], Z) - g0 - ha[a] - ha[b])
+        Mc = np.stack([Y(qh, Z, I[b]) - g0 for b in range(n)])  # (b, i, c): column b of M per unit parameter
+        Jq = np.empty((n,) + g0.shape)
+        dM = np.empty((n, n) + g0.shape)
+        dJv = np.empty((n, n) + g0.shape)  # (k, a, i, c): d/dq_k of dh/dv_a at (qh, vh)
+        Jv = 2 * np.einsum("abic,b->aic", gam, vh)  # exact: h is quadratic in v
+        mag = np.abs(f0) + np.abs(g0)
+        for k in range(n):
+            qk = qh + eta * I[k]
+            gk = Y(qk, Z, Z)
+            Jq[k] = (Y(qk, vh, Z) - f0) / eta
+            for b in range(n):
+                dM[k, b] = (Y(qk, Z, I[b]) - gk - Mc[b]) / eta
+                dJv[k, b] = (0.5 * (Y(qk, vh + I[b], Z) - Y(qk, vh - I[b], Z)) - Jv[b]) / eta
+        flt = 4 * _PIN_REL / eta
+        # bounds on the true derivatives (forward-difference truncation by Bernstein, pinocchio's float error)
+        vs = float(np.sum(np.abs(vh)))
+        JqB = np.abs(Jq) + eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]) + flt * (mag + np.abs(Jq) * eta)
+        dMB = np.abs(dM) + 2 * eta * geo["M"] + flt * (2 + np.abs(dM) * eta)
+        dJvB = np.abs(dJv) + 4 * eta * geo["gamma"] * (vs + 1) + flt * (2 * mag + np.abs(dJv) * eta)
+        # speeds and position boxes of the step (true motion)
+        ebar = self.ebar[j]
+        ev_max = self.ev_mot_max + self.ev_pos[j]
+        sp = np.abs(vh) + ev_max  # bound on the true |qd| over the step
+        dq_mean = sp * dt / 4 + self.qddm * dt**2 / 8
+        dq_max = sp * dt / 2 + self.qddm * dt**2 / 8 + ebar
+        qddm = self.qddm
+        # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order
+        dMq = np.einsum("kbic,b->kic", dMB, qddm)
+        A_mot = np.einsum("kic,k->ic", dMq, dq_mean) + 4 * geo["M"] * qddm.sum() * dq_max.sum() ** 2
+        A_pos = np.einsum("kic,k->ic", dMq, ebar)
+        # (h + g)(q(t), qd(t)) against (h + g)(qh, vh): first order in q and v (local), the v-quadratic part
+        # exactly (local Christoffel symbols), the q-q and q-v second order with local d/dq of dh/dv and Bernstein
+        absJv = np.abs(Jv)
+        absG = np.abs(gam)
+        mot, pos = self.ev_mot_max, self.ev_pos[j]
+        Q_all = np.einsum("abic,a,b->ic", absG, ev_max, ev_max)
+        Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
+        dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
+        rem = (4 * (geo["gamma"] * float(sp.sum()) ** 2 + geo["g"]) * dqs * dqs
+               + np.einsum("kaic,k,a->ic", dJvB, dq_max, ev_max) + 2 * geo["gamma"] * dvs * dvs * dqs)
+        H_mot = (np.einsum("kic,k->ic", JqB, dq_mean) + np.einsum("aic,a->ic", absJv, self.ev_mot_mean) + Q_mm + rem)
+        # the speed estimate's measurement error enters through the row's exact gradient (window loop, "Jv")
+        H_pos = np.einsum("kic,k->ic", JqB, ebar) + (Q_all - Q_mm)
+        # |M(true mid) - M(qh)| per column b
+        dlt = np.einsum("kbic,k->bic", dMB, ebar) + 2 * geo["M"] * float(ebar.sum()) ** 2
+        out = {"g0": g0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "H_pos": H_pos,
+               "Cmax": dlt.max(axis=0),
+               "Dloc": np.einsum("bic,b->ic", dlt, np.abs(self.dq[j]) + self.e[j] + self.e[j + 1]),
+               "Ecur": np.einsum("bic,b->ic", np.abs(Mc), self.e[j]),
+               "mag": np.abs(g0), "Jv": Jv}
+        # sample j (between steps j-1 and j)
+        prev = self.cache.get(j - 1)
+        if prev is None and with_prev and j - 1 >= self.m - 1:
+            prev = self._compute(j - 1, with_prev=False)
+        if prev is not None:
+            dMhat = prev["Mc"] - Mc
+            dMj = np.abs(dMhat) + prev["dlt"] + dlt  # bound on |M_{j-1} - M_j| at the true positions
+            out["B_mot"] = np.einsum("bic,b->ic", dMj, self.ew_mot)
+            # the secant's measurement error times dMhat goes through the row's exact gradient (window loop);
+            # here its product with the difference between the true and the measured dM
+            out["B_pos"] = np.einsum("bic,b->ic", prev["dlt"] + dlt, self.ew_pos[j])
+            out["dMhat"] = dMhat
+            out["Eknot"] = np.einsum("bic,b->ic", np.abs(prev["Mc"]), self.e[j])
+            out["Ediff"] = np.einsum("bic,b->ic", np.abs(prev["Mc"] - Mc), self.e[j])
+        return out
+
+
+def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int, stride: int,
+                       first_sample: int = 0, position_error=None, progress=None,
+                       kernel_shape: str = "triangle") -> CertifiedEquation:
+    """The derived interval equation (module docstring) of a serial robot's log.
+
+    Parameters
+    ----------
+    robot : :class:`ident.robots.serial.SerialRobot` (revolute joints)
+    base : its :class:`ident.robots.serial.BaseParameters`
+    q : (N, n) measured joint positions [rad]; tau : (N, n) logged joint torques [N m]
+    spec : :class:`ErrorSpec` of the log (n joints, ``sample_period`` the log's step)
+    half_width : H, kernel half-width [steps] (window ``2 H`` steps); stride : row spacing [steps];
+    kernel_shape : ``"triangle"`` or ``"hann"`` (:func:`ident.processing.weakform.make_kernel`; the radii hold for
+    any kernel linear between the samples, >= 0, zero at both ends)
+    first_sample : index of q[0] in the whole log (for ``window``)
+    position_error : (N, n) bound on ``|q - q_true|`` [rad], default ``spec.position_error(q)`` (give it when
+        the resolution applies on another side, e.g. motor angles mapped to the joints)
+    progress : callable(done, total) or None
+
+    Returns
+    -------
+    :class:`CertifiedEquation`, rows ordered window-major, joint-minor.
+    """
+    import pinocchio as pin
+
+    t0 = time.perf_counter()
+    nj = robot.n_joints
+    q = np.asarray(q, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    if q.ndim != 2 or q.shape[1] != nj or tau.shape != q.shape:
+        raise ValueError(f"q, tau must both have shape (N, {nj}), got {q.shape}, {tau.shape}")
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(tau))):
+        raise ValueError("q, tau must be finite")
+    if spec.n_joints != nj:
+        raise ValueError(f"spec must describe {nj} joints, got {spec.n_joints}")
+    H, stride = int(half_width), int(stride)
+    if H < 2 or stride < 1:
+        raise ValueError(f"half_width must be >= 2 and stride >= 1, got {half_width!r}, {stride!r}")
+    gamma_l = 8 * (2 * H + 4) * 2.0**-53  # a-priori error of the window sums (products and sums of L terms)
+    dt = spec.sample_period
+    geo = geometry_bounds(robot)
+    N = q.shape[0]
+    e = spec.position_error(q) if position_error is None else np.asarray(position_error, dtype=float)
+    if e.shape != q.shape or np.any(~np.isfinite(e)) or np.any(e < 0):
+        raise ValueError(f"position_error must be finite, >= 0, shape {q.shape}, got shape {e.shape}")
+    m = secant_span(spec, float(np.median(e)))
+    st_ = _Steps(robot, geo, q, e, dt, spec.qd_max, spec.qdd_max, m)
+    qddm = spec.qdd_max
+    L = 2 * H
+    kern = make_kernel(L, dt, kernel_shape)
+    k = kern.knots  # (L+1,) at the window's samples [1/s], int k = 1
+    K1 = kern.integrals  # int_step k, k >= 0
+    kp = np.diff(k) / dt  # (L,) slopes [1/s^2]
+    kp_ext = np.concatenate([[0.0], kp, [0.0]])
+    dkp = np.abs(np.diff(kp_ext))  # (L+1,) |k'_{j-1} - k'_j| at sample j of the window
+    starts = np.arange(m, N - m - L, stride)
+    if starts.size == 0:
+        raise ValueError(f"q must hold more than 2 H + 2 m = {L + 2 * m} samples for one row, got {N}")
+    body_of_col = np.repeat(np.arange(nj), 10)
+    mask = (np.arange(nj)[:, None] <= body_of_col[None, :]).astype(float)  # (n rows, 10 n cols)
+    R_ = len(starts)
+    ni = 10 * nj
+    Wi = np.zeros((R_, nj, ni))
+    mag = np.zeros((R_, nj, ni))
+    parts_i = {name: np.zeros((R_, nj, ni)) for name in PARTS}
+    model, data = robot.model, robot.data
+    vh, dq = st_.vh, st_.dq
+    for r, s in enumerate(starts):
+        st = slice(s, s + L)  # steps of the window
+        sm = slice(s, s + L + 1)  # samples of the window
+        st_.evict(s - 1)
+        kw = k[:, None] * st_.w[sm]  # (L+1, n)
+        x = kw[1:] - kw[:-1]
+        u = x - kp[:, None] * dq[st]  # (L, n)
+        vs = np.sqrt(K1)[:, None] * vh[st]
+        acc = np.zeros((nj, ni))
+        ab = np.zeros((nj, ni))
+        part = {name: np.zeros((nj, ni)) for name in PARTS}
+        xs = np.abs(x).sum(axis=1)
+        for jj in range(L):
+            j = s + jj
+            d = st_.get(j)
+            Yj = pin.computeJointTorqueRegressor(model, data, st_.qbar[j], vs[jj], u[jj])
+            acc += Yj + (K1[jj] - 1.0) * d["g0"]
+            ab += np.abs(Yj) + abs(K1[jj] - 1.0) * d["mag"]
+            part["mass_motion"] += K1[jj] * d["A_mot"]
+            part["coriolis_motion"] += K1[jj] * d["H_mot"]
+            part["speed_motion"] += k[jj] * d["B_mot"]
+            part["mass_position"] += K1[jj] * d["A_pos"] + d["Cmax"] * xs[jj] + abs(kp[jj]) * d["Dloc"]
+            part["coriolis_position"] += K1[jj] * d["H_pos"]
+            part["speed_position"] += k[jj] * d["B_pos"]
+            # measurement through the exact gradient of sum_j k'_j M_j dq_j (sample jj of the window)
+            part["gradient_position"] += (dkp[jj] * (d["Ecur"] if jj == 0 else d["Eknot"])
+                                          + (abs(kp[jj]) * d["Ediff"] if jj else 0.0))
+        # h at the measured speed estimate: sum_j K1_j Jv_j (delta_{j+m} - delta_{j+1-m}) / S, summed by parts
+        Wt = K1[:, None, None, None] * np.stack([st_.get(s + jj)["Jv"] for jj in range(L)])  # (L, a, i, c)
+        G = np.zeros((L + 2 * m - 1,) + Wt.shape[1:])
+        G[2 * m - 1: 2 * m - 1 + L] += Wt  # sample offset jj + m, stored from offset 1 - m
+        G[:L] -= Wt  # sample offset jj + 1 - m
+        eo = e[s + 1 - m: s + L + m]  # (L + 2m - 1, a)
+        part["coriolis_position"] += np.einsum("oaic,oa->ic", np.abs(G), eo) / st_.S
+        # the sample-instant secants w_j in sum_j k_j w_j (M_{j-1} - M_j): (delta_{j+m} - delta_{j-m}) / (2 m dt)
+        Wk = k[:, None, None, None] * np.stack([st_.get(s + jj)["dMhat"] for jj in range(L + 1)])  # (L+1, b, i, c)
+        G2 = np.zeros((L + 1 + 2 * m,) + Wk.shape[1:])
+        G2[2 * m:] += Wk  # sample offset jj + m, stored from offset -m
+        G2[:L + 1] -= Wk  # sample offset jj - m
+        part["speed_position"] += np.einsum("obic,ob->ic", np.abs(G2), e[s - m: s + L + m + 1]) / (2 * m * dt)
+        d_end = st_.get(s + L)  # sample s + L: the last boundary term |k'_{L-1}| |M_{L-1}| e_L
+        part["gradient_position"] += dkp[L] * d_end["Eknot"]
+        Wi[r], mag[r] = acc, ab
+        for name in PARTS:
+            parts_i[name][r] = part[name]
+        if progress is not None:
+            progress(r + 1, R_)
+    st_.evict(N)
+    # ---- friction, rotor inertia, offsets (the generic weak-form columns) and the torque side
+    windows = RowWindows(start=starts, steps=L)
+    Fqdd, r_qdd_pos, _ = imot_columns(q, e, windows, kern)
+    Fqd, r_qd_pos, r_qd_mot = viscous_columns(q, e, windows, kern, qddm)
+    Fsign, r_sign, _ = coulomb_columns(q, e, windows, kern, qddm)
+    if robot.coupled_wrist is not None:  # sign(qd_a + qd_b) of the wrist motor, the same per-step rule
+        a, b = robot.coupled_wrist
+        v1 = np.diff(q, axis=0) / dt
+        vm = v1[:, a] + v1[:, b]
+        margin = up((e[:-1, a] + e[1:, a] + e[:-1, b] + e[1:, b]) / dt + 0.5 * (qddm[a] + qddm[b]) * dt)
+        cm = np.abs(vm) > margin
+        Fsign_m = windows.gather(np.where(cm, np.sign(vm), 0.0)) @ K1
+        r_sign_m = up(windows.gather((~cm).astype(float)) @ K1 + gamma_l)
+    if spec.torque_timing == "sample":  # exact integral of k times the interpolation of the samples
+        c_tau = np.zeros(L + 1)
+        c_tau[:-1] += dt * (k[:-1] / 3 + k[1:] / 6)
+        c_tau[1:] += dt * (k[:-1] / 6 + k[1:] / 3)
+        taus = windows.gather_knots(tau)  # (R, L + 1, n)
+        y = np.einsum("u,ruj->rj", c_tau, taus)
+        y_fp = gamma_l * np.einsum("u,ruj->rj", np.abs(c_tau), np.abs(taus)) + 1e-300
+        k_abs = float(up(np.sum(np.abs(c_tau)) * (1 + gamma_l)))
+    else:
+        y, y_fp = torque_rows(tau, windows, kern)
+        k_abs = kern.l1
+    # ---- assemble the standard columns (n rows per window)
+    p = robot.n_parameters
+    Wc = np.zeros((R_, nj, p))
+    Dpos = np.zeros((R_, nj, p))
+    Dmot = np.zeros((R_, nj, p))
+    Dcou = np.zeros((R_, nj, p))
+    ni = 10 * nj
+    Wc[:, :, :ni] = Wi
+    for name in PARTS:
+        parts_i[name] = up(parts_i[name] * mask[None])
+    Dpos[:, :, :ni] = sum(parts_i[nm] for nm in PARTS if nm.endswith("position"))
+    Dmot[:, :, :ni] = sum(parts_i[nm] for nm in PARTS if nm.endswith("motion"))
+    col = ni
+    eye = np.arange(nj)
+    k_sum = float(np.sum(K1))
+    for kind in [k for k in ("fv", "fs", "Ia", "off") if f"{k}1" in robot.names]:  # SerialRobot.extra_columns order
+        cols = col + eye
+        if kind == "fv":
+            Wc[:, eye, cols] = Fqd
+            Dpos[:, eye, cols] = r_qd_pos
+            Dmot[:, eye, cols] = r_qd_mot
+        elif kind == "fs":
+            Wc[:, eye, cols] = Fsign
+            Dcou[:, eye, cols] = r_sign
+        elif kind == "Ia":
+            Wc[:, eye, cols] = Fqdd
+            Dpos[:, eye, cols] = r_qdd_pos
+        elif kind == "off":
+            Wc[:, eye, cols] = k_sum
+        col += nj
+    if robot.coupled_wrist is not None:
+        a, b = robot.coupled_wrist
+        for row in (a, b):
+            Wc[:, row, col] = Fqdd[:, a] + Fqdd[:, b]
+            Dpos[:, row, col] = r_qdd_pos[:, a] + r_qdd_pos[:, b]
+            Wc[:, row, col + 1] = Fqd[:, a] + Fqd[:, b]
+            Dpos[:, row, col + 1] = r_qd_pos[:, a] + r_qd_pos[:, b]
+            Dmot[:, row, col + 1] = r_qd_mot[:, a] + r_qd_mot[:, b]
+            Wc[:, row, col + 2] = Fsign_m
+            Dcou[:, row, col + 2] = r_sign_m
+    # ---- floating-point allowance: stated for pinocchio, a-priori for the window sums (the extra columns' sums
+    # are in their position radii above; the offset column's sum of L terms gets gamma_L)
+    Dflt = np.zeros((R_, nj, p))
+    Dflt[:, :, :ni] = (_PIN_REL + gamma_l) * mag * mask[None]
+    Dflt[:, :, ni:] = gamma_l * np.abs(Wc[:, :, ni:])
+    # ---- torque side
+    t_err = spec.torque_error * k_abs
+    if spec.torque_timing == "sample" and spec.torque_rate is not None:
+        t_err = t_err + spec.torque_rate * dt / 2 * k_abs
+    if spec.latency > 0:
+        t_err = t_err + spec.torque_rate * spec.latency * k_abs
+    model_term = spec.model_error * k_abs
+    y_rnd = y_fp
+    # ---- base columns, flattened rows (window-major, joint-minor)
+    ind = np.asarray(base.independent)
+    flat = lambda x: x.reshape(R_ * nj, p)  # noqa: E731
+    Wfull = flat(Wc)
+    if base.dependent.size:
+        dev = np.abs(Wfull[:, base.dependent] - Wfull[:, ind] @ base.beta)
+        scale = np.abs(Wfull).max()
+        if dev.max() > 1e-6 * max(scale, 1.0):
+            raise ValueError("the weak-form rows break the base parameters' structural dependences "
+                             f"(relative {dev.max() / scale:.2e}); the base was computed for another robot model")
+    joint = np.tile(eye, R_)
+    terms = {"position": flat(Dpos)[:, ind], "motion": flat(Dmot)[:, ind], "coulomb": flat(Dcou)[:, ind],
+             "float": flat(Dflt)[:, ind], "torque": np.tile(t_err, R_), "model": np.tile(model_term, R_), "rounding": y_rnd.reshape(-1)}
+    D = up(up(up(terms["position"] + terms["motion"]) + terms["coulomb"]) + terms["float"])
+    bound = up(up(terms["torque"] + terms["model"]) + terms["rounding"])
+    window = np.repeat(np.stack([starts, starts + L], axis=1) + int(first_sample), nj, axis=0)
+    info = {"kernel": kernel_shape, "half_width": H, "stride": stride, "window_seconds": L * dt, "secant_half_span": m,
+            "rows": int(R_ * nj), "windows": int(R_), "geometry": geo, "samples": int(N),
+            "coulomb_uncertain_share": float(np.mean(r_sign > 0)) if r_sign.size else 0.0,
+            "seconds": time.perf_counter() - t0}
+    parts = {}
+    for name in PARTS:
+        full = np.zeros((R_, nj, p))
+        full[:, :, :ni] = parts_i[name]
+        parts[name] = flat(full)[:, ind]
+    return CertifiedEquation(Wc=Wfull[:, ind], D=D, y=y.reshape(-1), bound=bound, joint=joint, window=window,
+                             names=tuple(base.names), terms=terms, parts=parts, info=info)
+
+
+def certificate(eq: CertifiedEquation, W_true, y_true, theta_true) -> dict:
+    """The derived radii beside the actual errors (truth known: a simulation), row by row.
+
+    W_true : (m, r) the true rows ``int k Y dt`` (of the true motion); y_true : (m,) ``int k tau_applied dt``;
+    theta_true : (r,) base parameters. Returns JSON-ready: ``rows``, ``entry_violations`` (``|Wc - W_true| >
+    D``), ``torque_violations`` (``|y - y_true| > bound``), ``violations`` (rows with ``|y - Wc theta| > bound +
+    D |theta|``), ``min_margin`` (the smallest ``bound + D |theta| - |y - Wc theta|`` [N m]), ``max_ratio`` (the
+    largest actual error over its radius), per term its max and median row radius at theta and its share of
+    the summed radii (``terms``), and the same for the inertial parts (``parts``).
+    """
+    W_true = np.asarray(W_true, dtype=float)
+    y_true = np.asarray(y_true, dtype=float)
+    th = np.asarray(theta_true, dtype=float)
+    err_W = np.abs(eq.Wc - W_true)
+    err_y = np.abs(eq.y - y_true)
+    res = np.abs(eq.y - eq.Wc @ th)
+    total = eq.row_radius(np.abs(th))["total"]
+    summary = eq.summary(np.abs(th))
+    return {
+        "rows": int(len(eq)), "entry_violations": int(np.sum(err_W > eq.D)),
+        "torque_violations": int(np.sum(err_y > eq.bound)), "violations": int(np.sum(res > total)),
+        "min_margin": float(np.min(total - res)), "max_ratio": float(np.max(res / total)),
+        "actual_max": float(np.max(res)), "radius_median": float(np.median(total)),
+        "terms": summary["terms"], "parts": summary["parts"],
+    }
+
+
+# ---------------------------------------------------------------------------------------------- spec check
+@dataclass(frozen=True)
+class SpecCheck:
+    """Proven lower bounds of the true motion's max |qd|, max |qdd| per joint from the data, against the spec."""
+
+    qd_lower: np.ndarray
+    qdd_lower: np.ndarray
+    qd_max: np.ndarray
+    qdd_max: np.ndarray
+
+    @property
+    def contradicted(self) -> list[str]:
+        out = [f"qd_max of joint {i + 1} ({self.qd_max[i]:.4g} rad/s < {self.qd_lower[i]:.4g} proven by the data)"
+               for i in np.flatnonzero(self.qd_lower > self.qd_max)]
+        out += [f"qdd_max of joint {i + 1} ({self.qdd_max[i]:.4g} rad/s^2 < {self.qdd_lower[i]:.4g} proven by the "
+                f"data)" for i in np.flatnonzero(self.qdd_lower > self.qdd_max)]
+        return out
+
+    def to_dict(self) -> dict:
+        return {"qd_lower": self.qd_lower.tolist(), "qdd_lower": self.qdd_lower.tolist(),
+                "qd_max": self.qd_max.tolist(), "qdd_max": self.qdd_max.tolist(), "contradicted": self.contradicted}
+
+
+def check_motion_bounds(q, spec: ErrorSpec, span: int = 20, position_error=None) -> SpecCheck:
+    """Lower bounds of the TRUE max |qd| and max |qdd| that the measured positions prove.
+
+    A secant over ``span`` steps is the mean of qd over it (true positions), so ``max|qd| >= |secant| - (e_a +
+    e_b) / (span dt)``; the second difference over ``span`` steps is a weighted mean of qdd, so ``max|qdd| >=
+    |second difference| - 4 e / (span dt)^2``. A stated bound below these is contradicted by the data.
+    position_error : (N, n) bound on the position error [rad], default ``spec.position_error(q)``.
+    """
+    q = np.asarray(q, dtype=float)
+    e = spec.position_error(q) if position_error is None else np.asarray(position_error, dtype=float)
+    h = span * spec.sample_period
+    sec = (q[span:] - q[:-span]) / h
+    qd_lo = np.max(np.abs(sec) - (e[span:] + e[:-span]) / h, axis=0)
+    d2 = (q[2 * span:] - 2 * q[span:-span] + q[:-2 * span]) / h**2
+    qdd_lo = np.max(np.abs(d2) - (e[2 * span:] + 2 * e[span:-span] + e[:-2 * span]) / h**2, axis=0)
+    return SpecCheck(np.maximum(qd_lo, 0.0), np.maximum(qdd_lo, 0.0), spec.qd_max.copy(), spec.qdd_max.copy())

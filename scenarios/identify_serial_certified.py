@@ -1,0 +1,138 @@
+"""``h4bench identify log.csv --urdf ROBOT.urdf --spec spec.toml``: the certified box of any serial robot's log
+(the H4's ``identify --spec`` is :mod:`scenarios.identify_certified`).
+
+The spec file's ``[error_model]`` table (:class:`ident.processing.errorspec.ErrorSpec`: sample period, position
+resolution or significant digits, torque timing, torque error, stated qd_max and qdd_max, model error, sources)
+replaces ``--bound``: the derived interval equation (:mod:`ident.robots.serial_certified`) of the whole log,
+the Oettli-Prager hull in the physical prior (as ``--urdf`` documents), the stated motion bounds checked
+against the data, and the term that dominates the radii. An optional ``[certified]`` table (the H4's keys where
+they apply) sets the kernel: ``kernel_steps`` (even; default 0.08 s of samples), ``kernel_shape`` (``triangle``,
+the default, or ``hann``), ``stride`` [samples] (default 0.02 s) and ``refine`` (default 3: rounds of the hull
+with the last box as prior, :func:`ident.estimators.uncertain_signed.signed_uncertain_hull`).
+"""
+
+from __future__ import annotations
+
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from h4bench import ident
+from h4bench.scenarios.identify import OptionError, read_serial_log, urdf_robot_and_prior
+from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
+
+__all__ = ["identify_urdf_spec", "read_kernel"]
+
+KERNEL_SECONDS = 0.08  # default kernel length [s] (an 80 ms triangle), rounded to an even number of steps
+STRIDE_SECONDS = 0.02  # default row spacing [s]
+REFINE_RTOL = 0.02  # stop refining when the widths' geometric mean shrank by less than this in a round
+_KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "refine": int}
+
+
+def read_kernel(spec_path, dt: float) -> dict:
+    """The optional ``[certified]`` table of the spec file for a serial robot: ``kernel_steps`` (even, >= 4;
+    default 0.08 s), ``kernel_shape`` (``triangle`` or ``hann``), ``stride`` [samples] (default 0.02 s),
+    ``refine`` (default 3); the H4's ``curvature_every`` does not apply. Errors name ``--spec`` and the file."""
+    path = Path(spec_path)
+    try:
+        table = tomllib.loads(path.read_text()).get("certified", {})
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise OptionError(f"--spec {path}: cannot read it as TOML ({exc})") from None
+    if not isinstance(table, dict) or set(table) - set(_KEYS):
+        raise OptionError(f"--spec {path} [certified]: with --urdf expected some of {sorted(_KEYS)}, got "
+                          f"{sorted(table) if isinstance(table, dict) else table!r}")
+    out = {"kernel_steps": 2 * max(2, int(round(KERNEL_SECONDS / dt / 2))), "kernel_shape": "triangle",
+           "stride": max(1, int(round(STRIDE_SECONDS / dt))), "refine": 3, **table}
+    for k, kind in _KEYS.items():
+        if isinstance(out[k], bool) or not isinstance(out[k], kind):
+            raise OptionError(f"--spec {path} [certified].{k} must be {kind.__name__}, got {out[k]!r}")
+    if out["kernel_steps"] < 4 or out["kernel_steps"] % 2:
+        raise OptionError(f"--spec {path} [certified].kernel_steps must be an even integer >= 4, got "
+                          f"{out['kernel_steps']!r}")
+    if out["kernel_shape"] not in ("triangle", "hann"):
+        raise OptionError(f"--spec {path} [certified].kernel_shape must be triangle or hann, got "
+                          f"{out['kernel_shape']!r}")
+    if out["stride"] < 1 or out["refine"] < 0:
+        raise OptionError(f"--spec {path} [certified]: stride must be >= 1 and refine >= 0, got {out['stride']!r}, "
+                          f"{out['refine']!r}")
+    return out
+
+
+def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction: bool = True,
+                       rotor_inertia: bool = True, offset: bool = True, coupled_wrist=None, out=None) -> dict:
+    """The certified box of a joint-side CSV log (``t, q1..qn, tau1..taun``) of the serial robot ``urdf`` under the
+    error specification ``spec_path``; writes ``result.json`` into ``out``. Returns the result dict
+    (``methods.certified``, ``error_model``, ``certified``; ``consistent`` False when the data contradict the
+    spec: the hull's set is proven empty)."""
+    from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
+    from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
+    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds
+
+    t0 = time.perf_counter()
+    robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,
+                                                   offset=offset, coupled_wrist=coupled_wrist)
+    nj = robot.n_joints
+    spec_path = Path(spec_path)
+    if not spec_path.is_file():
+        raise OptionError(f"--spec must name an existing TOML file, got {str(spec_path)!r} (not found)")
+    try:
+        spec = ErrorSpec.from_toml(spec_path, nj)
+    except ErrorSpecError as exc:
+        msg = str(exc)
+        raise OptionError(msg if msg.startswith("--spec") else f"--spec {spec_path}: {msg}") from None
+    kernel = read_kernel(spec_path, spec.sample_period)
+    out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
+    q, tau, dt = read_serial_log(path, nj)
+    if abs(dt - spec.sample_period) > 1e-3 * spec.sample_period:
+        raise OptionError(f"--spec {spec_path}: sample_period = {spec.sample_period:g} s, but the log {str(path)!r} "
+                          f"is sampled every {dt:g} s")
+    try:
+        eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
+                                stride=kernel["stride"], kernel_shape=kernel["kernel_shape"])
+    except ValueError as exc:
+        raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None
+    check = check_motion_bounds(q, spec, span=3)
+    prior = ident.Box(np.asarray(prior_info["lower"]), np.asarray(prior_info["upper"]), names=base.names)
+    entry: dict = {"kind": "guaranteed", "rigorous": True}
+    result = {
+        "scenario": f"identify-{Path(path).stem}", "kind": "identify", "robot": str(urdf), "source": str(path),
+        "samples": int(q.shape[0]), "dt": dt, "joints": list(robot.joint_names), "parameters": list(base.names),
+        "parameter_expressions": list(base.expressions), "parameter_units": list(base.units),
+        "standard_parameters": list(robot.names), "true": None, "rows": len(eq), "prior": prior_info,
+        "error_model": {**spec.to_dict(), "file": str(spec_path)}, "consistent": None,
+        "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,
+                            "singular_gap": base.singular_gap},
+    }
+    t1 = time.perf_counter()
+    try:
+        box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]),
+                                    rtol=REFINE_RTOL)
+    except ident.InconsistentDataError as exc:
+        box = None
+        scale = getattr(exc, "scale_lower", None)
+        entry.update(status="inconsistent", message=str(exc), error=type(exc).__name__, scale_lower=scale)
+        result["consistent"] = False
+        result["inconsistency"] = {"scale_lower": scale, "min_bound": None if scale is None else
+                                   float(scale * np.max(eq.bound))}
+    if box is not None:
+        result["consistent"] = True
+        rel = box.width / (prior.upper - prior.lower)
+        entry.update(status="ok", lower=box.lower.tolist(), upper=box.upper.tolist(), width=box.width.tolist(),
+                     relative_width_to_prior=rel.tolist(), narrowed_parameters=int(np.sum(rel < 0.99)),
+                     info={k: box.info.get(k) for k in ("nonempty_proven", "refinements", "lp_solves")})
+    entry["seconds"] = time.perf_counter() - t1
+    theta_abs = (np.maximum(np.abs(box.lower), np.abs(box.upper)) if box is not None
+                 else np.maximum(np.abs(prior.lower), np.abs(prior.upper)))
+    result["methods"] = {"certified": entry}
+    result["certified"] = {
+        "rows": len(eq), "kernel": {k: eq.info[k] for k in ("kernel", "half_width", "stride", "window_seconds",
+                                                             "secant_half_span")},
+        "geometry": eq.info["geometry"], **eq.summary(theta_abs),
+        "terms_at": "|theta| = the certified box's largest magnitudes (the prior's when the set is empty)",
+        "spec_check": check.to_dict(), "seconds": {"equation": eq.info["seconds"], "total": time.perf_counter() - t0},
+    }
+    with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
+        write_json(tmp / "result.json", result)
+    return result
