@@ -27,7 +27,8 @@ def test_every_builtin_runs_on_read_only_inputs_and_leaves_them_unchanged(proble
     W, y, bound, prior, groups = problem
     keep = [a.copy() for a in (W, y, groups)]
     for name in registry.BUILTINS:
-        ctx = {"groups": groups, "instruments": W} if name == "iv" else {"groups": groups}
+        # every context a built-in may take (the registry passes each only what it declares)
+        ctx = {"groups": groups, "instruments": W, "regressor_radius": np.zeros_like(W)}
         try:
             box = isolation.call(name, W, y, bound, prior, **ctx)
         except ident.InconsistentDataError:
