@@ -26,7 +26,7 @@ DESCRIPTION = "the derived (certified) error model: interval equation from senso
 # trajectory's peak times motion_margin_qd / motion_margin_qdd"
 SPEC_DEFAULTS = {
     "error_model": {"counts_per_turn": 0, "torque_error": 0.0, "qd_max": 0.0, "qdd_max": 0.0,
-                    "motion_margin_qd": 1.25, "motion_margin_qdd": 1.5, "model_error": 0.0},
+                    "motion_margin_qd": 1.25, "motion_margin_qdd": 2.0, "model_error": 0.0},
     # enabled: other kinds (the enclosure campaign, `h4bench run ... --error-model derived`) add the certified box
     "certified": {"kernel_steps": 100, "kernel_shape": "hann", "stride": 2, "curvature_every": 10,
                   "enabled": False},
