@@ -131,8 +131,11 @@ def min_consistent_scale(W, y, weights, prior) -> float:
     """
     from h4bench.ident.estimators.hull import chebyshev
 
-    W, y = check_W_y(W, y)
-    lo, hi, _ = check_prior(prior, W.shape[1])
+    Wc, yc = check_W_y(W, y)
+    check_prior(prior, Wc.shape[1])
+    lo, hi = (prior.lower, prior.upper) if isinstance(prior, Box) else prior
+    # the caller's arrays as given, not the validated contiguous copies: a copy may change how BLAS sums (last bits)
+    W, y, lo, hi = (np.asarray(a, dtype=float) for a in (W, y, lo, hi))
     w = np.asarray(weights, dtype=float)
     if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w <= 0):
         got = f"shape {w.shape}" if w.shape != y.shape else f"min {np.min(w)!r}, all finite: {np.isfinite(w).all()}"
