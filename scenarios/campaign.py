@@ -22,6 +22,7 @@ import ctypes
 import hashlib
 import importlib.metadata
 import json
+import multiprocessing
 import os
 import signal
 import sys
@@ -166,23 +167,31 @@ def _executor(camp: dict):
                                                   initargs=(os.getpid(),)), None
 
 
-def _stop_executor(executor) -> None:
+def _pool_children() -> set[int]:
+    """Process ids of this process's live :mod:`multiprocessing` children (public API: ``active_children``)."""
+    return {p.pid for p in multiprocessing.active_children()}
+
+
+def _stop_executor(executor, known_children: set[int]) -> None:
     """Cancel what is queued and end the workers now (a process pool's shutdown would wait for them).
 
-    The pool's manager thread, finding its workers gone, marks every pending future broken; on Python < 3.12
-    one cancelled meanwhile makes it raise ``InvalidStateError: CANCELLED`` (printed as "Exception in thread"),
-    so the pool is told to cancel its queue first and that one error of the manager thread is not printed."""
-    manager = getattr(executor, "_executor_manager_thread", None)
+    known_children : :func:`_pool_children` before the pool was made; the workers are the children started since
+    (the pool's, found through the public ``multiprocessing.active_children``). They are terminated (killed after
+    3 s); then ``shutdown(wait=True, cancel_futures=True)`` cancels the queue and joins the pool's manager thread,
+    which finds its workers gone and ends. On Python < 3.12 that thread raises ``InvalidStateError: CANCELLED``
+    on a future cancelled meanwhile (printed as "Exception in thread"): while stopping, that one error of a thread
+    other than the main thread is not printed (``threading.excepthook``, restored afterwards)."""
     previous = threading.excepthook
+    main = threading.main_thread()
 
     def hook(args):
-        if not (args.thread is manager and issubclass(args.exc_type, concurrent.futures.InvalidStateError)):
+        if not (args.thread is not main and args.exc_type is not None
+                and issubclass(args.exc_type, concurrent.futures.InvalidStateError)):
             previous(args)
 
     threading.excepthook = hook
-    procs = list((getattr(executor, "_processes", None) or {}).values())  # shutdown forgets them
+    procs = [p for p in multiprocessing.active_children() if p.pid not in known_children]
     try:
-        executor.shutdown(wait=False, cancel_futures=True)
         for proc in procs:
             try:
                 proc.terminate()
@@ -195,18 +204,18 @@ def _stop_executor(executor) -> None:
                 proc.kill()
                 proc.join(1.0)
         executor.shutdown(wait=True, cancel_futures=True)
-        if manager is not None:
-            manager.join(3.0)
     finally:
         threading.excepthook = previous
 
 
 class _TermAsInterrupt:
-    """SIGTERM raises KeyboardInterrupt in the main thread while a campaign runs (same clean stop as Ctrl-C)."""
+    """SIGTERM raises KeyboardInterrupt in the main thread while a campaign runs (same clean stop as Ctrl-C); the
+    previous handler is restored on exit. A handler that was not installed from Python (``getsignal`` gives None)
+    cannot be restored, so it is then left in place (SIGTERM keeps its own behaviour)."""
 
     def __enter__(self):
         self.previous = None
-        if threading.current_thread() is threading.main_thread():
+        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) is not None:
             self.previous = signal.signal(signal.SIGTERM, self._raise)
         return self
 
@@ -289,6 +298,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     started = time.perf_counter()
     errors: dict[int, str] = {}
     if todo:
+        children = _pool_children()  # the workers are the children started after this
         executor, client = _executor(camp)
         futures = {}
         interrupted = False
@@ -315,7 +325,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
         except KeyboardInterrupt:
             interrupted = True
             if client is None:
-                _stop_executor(executor)  # cancels the queued futures itself
+                _stop_executor(executor, children)  # cancels the queued futures itself
             else:
                 for fut in futures:
                     fut.cancel()
