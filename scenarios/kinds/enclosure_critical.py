@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from h4bench.ident.estimators.residuals import residual_bound
-from h4bench.scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
+from h4bench.scenarios.campaign import run_many
+from h4bench.scenarios.campaign_build import campaign_experiment
+from h4bench.scenarios.campaign_report import summarise, write_outputs
 from h4bench.scenarios.experiment import estimate_boxes
 from h4bench.scenarios.spec import ScenarioError
 
