@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from h4bench.ident.processing.filtering import ProcessingSettings, parallel_filter
-from h4bench.ident.processing.processing import raw_equation
+from h4bench.ident.robots.h4_equation import raw_equation
 from h4bench.ident.robots.h4 import regressor
 
 PARTS = ("noise", "derivatives", "model")

@@ -12,16 +12,19 @@ of a job on a local process pool or a Dask cluster, resumable, with provenance, 
   terminated, what finished is kept, and :class:`CampaignInterrupted` says how to resume. Workers die with the
   campaign even when it is killed (SIGKILL): each worker asks the kernel for a signal when its parent dies
   (Linux ``PR_SET_PDEATHSIG``) and watches its parent process as a fallback.
+
+The runs' experiments are built by :mod:`scenarios.campaign_build`, the summary and reports written by
+:mod:`scenarios.campaign_report`.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
-import copy
 import ctypes
 import hashlib
 import importlib.metadata
 import json
+import multiprocessing
 import os
 import signal
 import sys
@@ -29,15 +32,13 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
-
 import h4bench
 from h4bench import sim
 from h4bench.scenarios import plugins
 from h4bench.scenarios.rundir import prepare_folder, write_json
 from h4bench.scenarios.spec import ScenarioError
 from h4bench.scenarios.threads import single_blas_thread
-from h4bench.scenarios.timings import TimedJob, campaign_timings, imported_packages, timing_lines
+from h4bench.scenarios.timings import TimedJob, imported_packages
 
 # spec keys that do not change what a run computes
 _NOT_INPUTS = {"name", "description", "quick", "quick_applied"}
@@ -166,23 +167,31 @@ def _executor(camp: dict):
                                                   initargs=(os.getpid(),)), None
 
 
-def _stop_executor(executor) -> None:
+def _pool_children() -> set[int]:
+    """Process ids of this process's live :mod:`multiprocessing` children (public API: ``active_children``)."""
+    return {p.pid for p in multiprocessing.active_children()}
+
+
+def _stop_executor(executor, known_children: set[int]) -> None:
     """Cancel what is queued and end the workers now (a process pool's shutdown would wait for them).
 
-    The pool's manager thread, finding its workers gone, marks every pending future broken; on Python < 3.12
-    one cancelled meanwhile makes it raise ``InvalidStateError: CANCELLED`` (printed as "Exception in thread"),
-    so the pool is told to cancel its queue first and that one error of the manager thread is not printed."""
-    manager = getattr(executor, "_executor_manager_thread", None)
+    known_children : :func:`_pool_children` before the pool was made; the workers are the children started since
+    (the pool's, found through the public ``multiprocessing.active_children``). They are terminated (killed after
+    3 s); then ``shutdown(wait=True, cancel_futures=True)`` cancels the queue and joins the pool's manager thread,
+    which finds its workers gone and ends. On Python < 3.12 that thread raises ``InvalidStateError: CANCELLED``
+    on a future cancelled meanwhile (printed as "Exception in thread"): while stopping, that one error of a thread
+    other than the main thread is not printed (``threading.excepthook``, restored afterwards)."""
     previous = threading.excepthook
+    main = threading.main_thread()
 
     def hook(args):
-        if not (args.thread is manager and issubclass(args.exc_type, concurrent.futures.InvalidStateError)):
+        if not (args.thread is not main and args.exc_type is not None
+                and issubclass(args.exc_type, concurrent.futures.InvalidStateError)):
             previous(args)
 
     threading.excepthook = hook
-    procs = list((getattr(executor, "_processes", None) or {}).values())  # shutdown forgets them
+    procs = [p for p in multiprocessing.active_children() if p.pid not in known_children]
     try:
-        executor.shutdown(wait=False, cancel_futures=True)
         for proc in procs:
             try:
                 proc.terminate()
@@ -195,18 +204,18 @@ def _stop_executor(executor) -> None:
                 proc.kill()
                 proc.join(1.0)
         executor.shutdown(wait=True, cancel_futures=True)
-        if manager is not None:
-            manager.join(3.0)
     finally:
         threading.excepthook = previous
 
 
 class _TermAsInterrupt:
-    """SIGTERM raises KeyboardInterrupt in the main thread while a campaign runs (same clean stop as Ctrl-C)."""
+    """SIGTERM raises KeyboardInterrupt in the main thread while a campaign runs (same clean stop as Ctrl-C); the
+    previous handler is restored on exit. A handler that was not installed from Python (``getsignal`` gives None)
+    cannot be restored, so it is then left in place (SIGTERM keeps its own behaviour)."""
 
     def __enter__(self):
         self.previous = None
-        if threading.current_thread() is threading.main_thread():
+        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) is not None:
             self.previous = signal.signal(signal.SIGTERM, self._raise)
         return self
 
@@ -289,6 +298,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     started = time.perf_counter()
     errors: dict[int, str] = {}
     if todo:
+        children = _pool_children()  # the workers are the children started after this
         executor, client = _executor(camp)
         futures = {}
         interrupted = False
@@ -315,7 +325,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
         except KeyboardInterrupt:
             interrupted = True
             if client is None:
-                _stop_executor(executor)  # cancels the queued futures itself
+                _stop_executor(executor, children)  # cancels the queued futures itself
             else:
                 for fut in futures:
                     fut.cancel()
@@ -343,143 +353,3 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
             # finished by write_outputs (scenarios.timings.campaign_timings)
             "timings": {"started": started_wall, "sections": {**sections, "pool": seconds}, "computed": todo}}
     return [runs[i] for i in range(n)], info
-
-
-def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: list[str], method_line,
-                  tail: list[str] = ()) -> None:
-    """A campaign kind's files: ``widths.png`` (relative widths over the runs), ``report.md`` (``# Scenario
-    `name`: title``, the kind's ``facts``, the throughput, one line per method from ``method_line(name, m)``, the
-    median relative width table, ``tail``) and ``result.json``, atomically each."""
-    from h4bench.scenarios.judging import judged_table, plot_coverage
-    from h4bench.scenarios.report import relative_width_table
-    from h4bench.scenarios.rundir import write_json
-    from h4bench.sim.dataset import atomic_write_bytes
-
-    out = Path(out)
-    t_report = time.perf_counter()
-    plot_relative_widths(result, runs, out / "widths.png")
-    plot_coverage(result["methods"], out / "coverage.png")
-    info = result["campaign"]
-    staged = info.get("timings") or {}
-    if "started" in staged:  # the engine's staging dict -> the campaign's timings (docs/results.md)
-        workers = 0 if info.get("scheduler") else info["workers"]
-        sections = {**staged["sections"], "report": time.perf_counter() - t_report}
-        info["timings"] = campaign_timings(runs, staged["computed"], workers, staged["started"], sections)
-    lines = [f"# Scenario `{result['scenario']}`: {title}", "", *facts, *throughput_lines(result["campaign"])]
-    lines += [f"- {name}: {method_line(name, m)}" for name, m in result["methods"].items()]
-    lines += ["", "## Every method side by side", "",
-              "Coverage: runs whose box encloses the truth / runs (a run without a box does not cover), with its exact "
-              "Clopper-Pearson 95 % interval; level: a statistical method's stated confidence; unsound runs: the "
-              "guaranteed box was narrower than the exact hull beyond the hull's tolerance (see "
-              "`scenarios/judging.py`); width vs hull: per parameter the median over the runs of width / hull "
-              "width, then the median over the parameters.", "", judged_table(result["methods"], campaign=True), "",
-              "Plot: `coverage.png` (coverage against median width vs hull, one point per method).", ""]
-    failing = {n: m["failure_messages"] for n, m in result["methods"].items() if m.get("failure_messages")}
-    for name, msgs in failing.items():
-        lines += [f"- {name} failed on {len(result['methods'][name]['failed_runs'])} run(s): {msgs[0]}"]
-    if failing:
-        lines += [""]
-    lines += ["", "## Median relative width (width / |true value|) per parameter", "", relative_width_table(result),
-              "", *tail, "Plot: `widths.png`.", *timing_lines(info.get("timings"))]
-    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
-    write_json(out / "result.json", result)
-
-
-def throughput_lines(info: dict) -> list[str]:
-    """The report's line on campaign throughput (none when every run was reused)."""
-    if not info["runs_per_minute"]:
-        return []
-    where = info["scheduler"] or f"{info['workers']} local worker(s)"
-    return [f"- throughput: {info['runs_per_minute']:.3g} runs per minute ({info['computed']} runs in "
-            f"{info['seconds']:.4g} s on {where})"]
-
-
-def summarise(spec: dict, seed: int, runs: list[dict], info: dict) -> dict:
-    """A campaign's result: the common keys of every result (docs/results.md) over all runs (worst min consistent
-    bound and oracle residual), how many runs the bound covered, the per-method summary and the engine's
-    ``info``."""
-    first = runs[0]
-    return {
-        "scenario": spec["name"], "kind": spec["kind"], "seed": seed, "quick": spec.get("quick_applied", False),
-        "model": first["model"], "parameters": first["parameters"], "true": first["true"],
-        "bound": first["bound"], "runs": len(runs),
-        "min_consistent_bound": float(max(r["min_consistent_bound"] for r in runs)),
-        "oracle_residual": float(max(r["oracle_residual"] for r in runs)),
-        "runs_bound_covers_residual": int(sum(r["bound_covers_residual"] for r in runs)),
-        "noise_shapes": spec["campaign"]["noise_shapes"], "parameter_spread": spec["campaign"]["parameter_spread"],
-        "methods": summarise_methods(runs), "campaign": info,
-    }
-
-
-def summarise_methods(runs: list[dict]) -> dict:
-    """Per method over the runs (:func:`scenarios.judging.summarise_methods`): the claims, misses (and those where
-    the bound covered the residual), failed runs, unsound runs, coverage with its Clopper-Pearson interval,
-    median width vs hull, median and p90 relative widths (width / |true|), median seconds."""
-    from h4bench.scenarios.judging import summarise_methods as judged
-
-    return judged(runs)
-
-
-def plot_relative_widths(result: dict, runs: list[dict], path: Path) -> None:
-    """Box plots of the relative widths per parameter and method over the runs (log scale)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = result["parameters"]
-    k = len(result["methods"])
-    cols = min(k, 3)
-    rows = -(-k // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(7 * cols, 5 * rows), squeeze=False)
-    for ax in axes.flat[k:]:
-        ax.set_visible(False)
-    for ax, (name, m) in zip(axes.flat, result["methods"].items()):
-        rel = [np.asarray(r["methods"][name]["width"]) / np.abs(np.asarray(r["true"])) for r in runs
-               if r["methods"][name].get("status") == "ok"]
-        if rel:
-            ax.boxplot(np.array(rel), tick_labels=names)
-        ax.set_yscale("log")
-        ax.set_title(f"{name}: relative widths over {len(rel)} runs, {m['misses']} miss(es)")
-        ax.tick_params(axis="x", rotation=60)
-        ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def campaign_spec(spec: dict, index: int) -> dict:
-    """The spec of run ``index``: the index's noise shape (cycling through ``campaign.noise_shapes``)."""
-    spec_i = copy.deepcopy(spec)
-    shapes = spec["campaign"]["noise_shapes"]
-    spec_i["noise"]["shape"] = shapes[index % len(shapes)]
-    return spec_i
-
-
-def campaign_experiment(spec: dict, index: int, base_seed: int, estimate: bool = True):
-    """The experiment of run ``index``: seed ``base_seed + index`` (noise, randomised true parameters), the
-    index's noise shape, and the trajectory of seed ``base_seed + index % campaign.trajectories`` (one per run
-    when 0; a few designed trajectories shared by many runs keep campaigns fast, the design being cached).
-    Returns (ExperimentRun, noise shape)."""
-    from h4bench.scenarios.experiment import run_experiment, traced_reference
-
-    seed = base_seed + index
-    spec_i = campaign_spec(spec, index)
-    path = spec["model"] or None
-    spread = spec["campaign"]["parameter_spread"]
-    t0 = time.perf_counter()
-    model = sim.randomised_model(seed, spread, path) if spread > 0 else sim.load_model(path)
-    t_model = time.perf_counter() - t0
-    n_traj = spec["campaign"]["trajectories"]
-    reference, source = None, None
-    t0 = time.perf_counter()
-    if n_traj:
-        geometry = sim.H4Geometry.from_model(model)
-        reference, source = traced_reference(spec_i, geometry, base_seed + index % n_traj)
-    t_traj = time.perf_counter() - t0
-    run = run_experiment(spec_i, seed, model=model, model_path=path, reference=reference, estimate=estimate)
-    run.timings["model"] = t_model
-    if source is not None:
-        run.timings["trajectory"] += t_traj
-        run.timings["trajectory_source"] = source
-    return run, spec_i["noise"]["shape"]

@@ -15,7 +15,7 @@ import numpy as np
 from h4bench import ident
 from h4bench import sim
 from h4bench.ident.processing.filtering import ProcessingSettings
-from h4bench.ident.processing.processing import Equation, build_equation, raw_equation
+from h4bench.ident.robots.h4_equation import Equation, build_equation, raw_equation
 from h4bench.ident.estimators import registry
 from h4bench.scenarios import judging
 from h4bench.scenarios.budget import error_budget

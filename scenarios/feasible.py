@@ -282,7 +282,7 @@ def polygon_history(run, pairs, history: dict, directions: int = 16, refine: int
     ``"time"``, ``"seconds"}``.
     """
     from h4bench.ident.estimators.projection import project_pair
-    from h4bench.ident.estimators.support import SupportLP
+    from h4bench.ident.estimators import SupportLP
 
     t0 = time.perf_counter()
     eq, t = run.equation, np.asarray(run.dataset.t, dtype=float)

@@ -30,7 +30,7 @@ from h4bench import sim
 from h4bench.ident.errors import EstimatorError
 from h4bench.ident.estimators import registry
 from h4bench.ident.processing.filtering import ProcessingSettings
-from h4bench.ident.processing.processing import BLOCK_SAMPLES, build_equation
+from h4bench.ident.robots.h4_equation import BLOCK_SAMPLES, build_equation
 from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 from h4bench.scenarios.spec import DEFAULTS
 
@@ -219,7 +219,7 @@ def identify_csv(path, bound, method: str = "hull", prior=(0.0, 2.0), model=None
     """Identify the 14 parameters from a CSV log and write ``result.json`` in ``out``.
 
     bound : raw-row bound [N m], one number or (4,) per joint; prior : (lower, upper) numbers, (14,) arrays
-    each, or a Box; block_samples : processing block length (:func:`ident.processing.processing.build_equation`);
+    each, or a Box; block_samples : processing block length (:func:`ident.robots.h4_equation.build_equation`);
     torque_timing : "hold" (each logged torque is a command held over its step: the regressor at mid-step) or
     "sample" (a torque measured at the sample instant), :func:`ident.processing.filtering.derivatives`;
     pairs : ``--pairs`` (``auto`` or ``NAME:NAME,...``): the feasible set's projections, ``feasible_set.png``;

@@ -71,14 +71,16 @@ def joint_position_error(spec, q_motor) -> np.ndarray:
 
 def _envelope(eq, lower, upper):
     """Rigorous ``[min, max]`` of ``W theta`` over ``W in [Wc - D, Wc + D]``, ``theta in [lower, upper]``."""
-    from h4bench.ident.numerics.interval import down, matmul, up
+    from h4bench.ident.estimators.residuals import interval_envelope
 
-    return matmul(down(eq.Wc - eq.D), up(eq.Wc + eq.D), lower, upper)
+    return interval_envelope(eq.Wc, eq.D, lower, upper)
 
 
 def _coverage(eq, box, bound):
+    from h4bench.ident.estimators.residuals import covered
+
     lo, hi = _envelope(eq, box.lower, box.upper)
-    inside = (eq.y >= lo - bound) & (eq.y <= hi + bound)
+    inside = covered(eq.y, lo, hi, bound)  # the widened envelope rounded outward
     return float(np.mean(inside)), [float(np.mean(inside[eq.joint == j])) for j in range(6)]
 
 

@@ -186,14 +186,14 @@ def consistent_bounds(s: Study) -> None:
     s : :class:`Study`, filled by the earlier stages; this stage sets the fields above on it (returns None).
     """
     from h4bench import ident
-    from h4bench.ident.estimators.hull import chebyshev
+    from h4bench.ident.estimators import min_consistent_scale
 
     eq, eq_rich, prior = s.eq, s.eq_rich, s.prior
     t0 = time.perf_counter()
     s.t_all = ident.min_consistent_bound(eq.W, eq.y, prior)
     s.t_j = np.array(per_joint(np.arange(len(eq)), eq.joint,
                                lambda rows: ident.min_consistent_bound(eq.W[rows], eq.y[rows], prior)))
-    s.scale = float(chebyshev(eq.W, eq.y, s.t_j[eq.joint], s.blo, s.bhi).upper)
+    s.scale = min_consistent_scale(eq.W, eq.y, s.t_j[eq.joint], (s.blo, s.bhi))
     s.b_joint = s.scale * s.t_j  # processed-row bound per joint that makes all identification rows consistent
     rich_prior = (np.r_[s.blo, s.flo], np.r_[s.bhi, s.fhi])
     s.t_all_rich = ident.min_consistent_bound(eq_rich.W, eq_rich.y, rich_prior)
@@ -210,13 +210,13 @@ def consistent_bounds(s: Study) -> None:
 def _box_entry(s: Study, k: float, box, t0: float) -> tuple[dict, tuple]:
     """The result entry of the hull box at ``k`` x the bound, its held-out interval envelope (rigorous, exact for
     a linear function over a box) widened by the bound, and that envelope's arrays ``(lower, upper, bound)``."""
-    from h4bench.ident.numerics.interval import point_matvec
+    from h4bench.ident.estimators.residuals import box_envelope, covered
 
     eq_ho = s.eq_ho
-    lo_e, hi_e = point_matvec(eq_ho.W, box.lower, box.upper)
+    lo_e, hi_e = box_envelope(eq_ho.W, box.lower, box.upper)
     b_ho = eq_ho.bound(k * s.b_joint / s.gain)
-    inside_model = (eq_ho.y >= lo_e) & (eq_ho.y <= hi_e)
-    inside = (eq_ho.y >= lo_e - b_ho) & (eq_ho.y <= hi_e + b_ho)
+    inside_model = covered(eq_ho.y, lo_e, hi_e, 0.0)
+    inside = covered(eq_ho.y, lo_e, hi_e, b_ho)  # the widened envelope rounded outward
     excess = np.maximum(0.0, np.maximum(lo_e - b_ho - eq_ho.y, eq_ho.y - hi_e - b_ho))
     entry = {
         "status": "ok", "factor": k, "lower": box.lower.tolist(), "upper": box.upper.tolist(),

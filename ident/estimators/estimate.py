@@ -121,6 +121,28 @@ def min_consistent_bound(W, y, prior) -> float:
     return _min_bound(W, y, lo, hi, least_squares_center(G, W, y, lo, hi))
 
 
+def min_consistent_scale(W, y, weights, prior) -> float:
+    """Rigorous upper bound of the smallest scale ``s*`` with ``|y - W theta| <= s* weights`` row by row for some
+    theta in the prior box (the weighted Chebyshev fit, :func:`ident.estimators.hull.chebyshev`).
+
+    W : (m, p); y : (m,); weights : (m,) > 0 (e.g. a per-joint bound shape, [N m]); prior : Box or (lower, upper).
+    ``bound = min_consistent_scale(...) * weights`` is guaranteed consistent; it exceeds ``s*`` only by the LP
+    tolerance. Raises :class:`~ident.numerics.lp.LPError` when HiGHS cannot solve the LP.
+    """
+    from h4bench.ident.estimators.hull import chebyshev
+
+    Wc, yc = check_W_y(W, y)
+    check_prior(prior, Wc.shape[1])
+    lo, hi = (prior.lower, prior.upper) if isinstance(prior, Box) else prior
+    # the caller's arrays as given, not the validated contiguous copies: a copy may change how BLAS sums (last bits)
+    W, y, lo, hi = (np.asarray(a, dtype=float) for a in (W, y, lo, hi))
+    w = np.asarray(weights, dtype=float)
+    if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w <= 0):
+        got = f"shape {w.shape}" if w.shape != y.shape else f"min {np.min(w)!r}, all finite: {np.isfinite(w).all()}"
+        raise ValueError(f"weights must be {y.size} finite positive numbers (one per row), got {got}")
+    return float(chebyshev(W, y, w, lo, hi).upper)
+
+
 # ------------------------------------------------------------------------------------------------ estimate
 def least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=None) -> np.ndarray:
     """Least squares of the rows weighted by ``1 / b`` (G = W^T W when b is None or constant), clipped to

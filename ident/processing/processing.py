@@ -4,7 +4,7 @@ The paper's chain (section 4.1), each step in :mod:`ident.processing.filtering`:
 
 1. zero-phase Butterworth low-pass on the measured q, central differences for qd and qdd; the samples at
    both ends (filter transients) are dropped;
-2. the regressor ``W(q, qd, qdd)`` (paper eqs. 14-18) and ``y = tau`` (the measured torques);
+2. the regressor ``W(q, qd, qdd)`` (paper eqs. 14-18 for the H4) and ``y = tau`` (the measured torques);
 3. rows whose joint speed is under the threshold are marked: ``sign(qd)`` is unreliable there;
 4. parallel filtering: the same FIR on y and every column of W, joint by joint, then decimation; the bound is
    propagated (``|h| * b``) with the floating-point error of the filter, and an output row is kept only if its
@@ -12,6 +12,9 @@ The paper's chain (section 4.1), each step in :mod:`ident.processing.filtering`:
 
 ``bound`` is the caller's claim about the raw rows: the torque error (noise) bound plus an allowance for the
 derivative estimation and the model's mismatch. It is propagated, never guessed.
+
+The chain is generic: the robot's regressor is an argument (``regressor(q, qd, qdd) -> (4n, p)``, row ``4k + i``
+= sample k, joint i) with its column names; the H4's binding is :mod:`ident.robots.h4_equation`.
 """
 
 from __future__ import annotations
@@ -23,7 +26,6 @@ import numpy as np
 from h4bench.ident.errors import ProcessingError
 from h4bench.ident.processing.filtering import (N_JOINTS, ProcessingSettings, default_edge_samples, derivatives,
                                         exclude_low_speed, parallel_filter)
-from h4bench.ident.robots.h4 import parameter_names, regressor
 
 
 @dataclass(frozen=True)
@@ -53,8 +55,11 @@ def _prior_abs_max(prior, p: int) -> np.ndarray | None:
     return np.maximum(np.abs(lower), np.abs(upper))
 
 
-def raw_equation(geometry, q, tau, dt: float, settings: ProcessingSettings | None = None, structure: str = "paper"):
+def raw_equation(regressor, q, tau, dt: float, settings: ProcessingSettings | None = None):
     """Steps 1-3: the unfiltered equation on the samples free of edge effects.
+
+    regressor : callable ``(q, qd, qdd) -> W`` with q, qd, qdd (n, 4) [rad, rad/s, rad/s^2] and W (4n, p), row
+    ``4k + i`` = sample k, joint i (e.g. the H4's, bound by :func:`ident.robots.h4_equation.raw_equation`).
 
     Returns (W (4n', p), y (4n',), keep (4n',) bool speed mask, samples (n',) original sample indices,
     (q, qd, qdd) estimated at those samples).
@@ -64,7 +69,7 @@ def raw_equation(geometry, q, tau, dt: float, settings: ProcessingSettings | Non
     v = est.valid
     qf, qd, qdd = est.q[v], est.qd[v], est.qdd[v]
     samples = np.arange(q.shape[0])[v]
-    w = regressor(geometry, qf, qd, qdd, structure=structure)
+    w = regressor(qf, qd, qdd)
     y = np.asarray(tau, dtype=float)[v].reshape(-1)
     keep = exclude_low_speed(qd, settings.speed_threshold)
     return w, y, keep, samples, (qf, qd, qdd)
@@ -145,9 +150,12 @@ def _reused_rows(raw, a: int, b: int, q, qd, qdd, p: int):
     return w[N_JOINTS * i0:N_JOINTS * i1]
 
 
-def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None = None, prior=None,
-                   structure: str = "paper", block_samples: int = BLOCK_SAMPLES, raw=None) -> Equation:
+def build_equation(regressor, names, dataset, bound, settings: ProcessingSettings | None = None, prior=None,
+                   block_samples: int = BLOCK_SAMPLES, raw=None) -> Equation:
     """The processed equation of a :class:`sim.Dataset` (t, q, tau) under a raw-row bound [N m].
+
+    regressor : callable ``(q, qd, qdd) -> W`` with q, qd, qdd (n, 4) and W (4n, p) (as for :func:`raw_equation`);
+    names : the p column names (the H4's binding: :func:`ident.robots.h4_equation.build_equation`).
 
     bound : the claim ``|tau_measured - W_true theta| <= bound`` on every raw row (noise plus the allowance
     for derivative and model errors) [N m]: a scalar, one value per joint (4,), or one per raw row (4n,)
@@ -185,7 +193,7 @@ def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None
         raise ValueError(f"block_samples must be an integer >= 1, got {block_samples!r}")
     n = len(dataset)
     b_raw = _row_bounds(bound, n)
-    names = parameter_names(structure)
+    names = tuple(names)
     t_abs = _prior_abs_max(prior, len(names))
     taps = settings.taps()
     L = taps.size
@@ -219,7 +227,7 @@ def build_equation(geometry, dataset, bound, settings: ProcessingSettings | None
         qd = est.qd[sl]
         w = _reused_rows(raw, a, b, est.q[sl], qd, est.qdd[sl], len(names))
         if w is None:
-            w = regressor(geometry, est.q[sl], qd, est.qdd[sl], structure=structure)
+            w = regressor(est.q[sl], qd, est.qdd[sl])
         y = np.asarray(tau[a:b], dtype=float).reshape(-1)
         rb = _bounds_of(b_raw, a, b)
         fe, rows, keep = select_rows(w, y, float(rb[0]) if scalar else rb, qd, settings, taps, t_abs)

@@ -491,6 +491,7 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
         decimation_fir,
         default_edge_samples,
         derivatives,
+        exclude_low_speed,
         parallel_filter,
     )
 
@@ -511,12 +512,12 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
         W = np.concatenate([W, extra], axis=2)
         names = names + extra_names
     y = tau[valid]
-    slow = np.abs(qd) < speed_threshold
+    fast = exclude_low_speed(qd, speed_threshold).reshape(n, nj)  # the shared chain's marking, (n, nj)
     if robot.coupled_wrist is not None:
         a, b = robot.coupled_wrist
         s = np.abs(qd[:, a] + qd[:, b]) < speed_threshold
-        slow[:, a] |= s
-        slow[:, b] |= s
+        fast[:, a] &= ~s
+        fast[:, b] &= ~s
     taps = decimation_fir(decimation, numtaps, fir_cutoff)
     L = taps.size
     t_abs = None if theta_abs_max is None else np.asarray(theta_abs_max, dtype=float)
@@ -524,15 +525,13 @@ def process(robot: SerialRobot, base: BaseParameters, q, tau, dt: float, *, cuto
                          joints=nj)
     gain, start = fe.l1_norm, fe.window_start
     m = start.size
-    bad = np.concatenate([np.zeros((1, nj)), np.cumsum(slow, axis=0)])
-    keep = (bad[start + L] - bad[start]) == 0  # (m, nj)
-    rows = np.flatnonzero(keep.reshape(-1))
+    rows = np.flatnonzero(fe.propagate_mask(fast.reshape(-1)))  # kept iff the whole window moves fast enough
     k_idx, j_idx = rows // nj, rows % nj
     centre = samples[start + (L - 1) // 2]
     window = np.stack([samples[start], samples[start + L - 1]], axis=1)
     info = {"raw_samples": int(q.shape[0]), "valid_samples": int(n), "edge_samples": int(valid.start),
             "taps": int(L), "decimation": int(decimation), "filtered_rows": int(m * nj), "rows_kept": int(rows.size),
-            "rows_slow": int(slow.sum()), "butterworth_padding": default_edge_samples(dt, cutoff_hz),
+            "rows_slow": int((~fast).sum()), "butterworth_padding": default_edge_samples(dt, cutoff_hz),
             "rounding_includes_W": t_abs is not None}
     if keep_raw:
         info["raw"] = {"W": W, "y": y, "sample": samples}

@@ -8,7 +8,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from h4bench.scenarios import report
-from h4bench.scenarios.campaign import campaign_experiment, check_same_campaign, provenance, run_many, summarise, write_outputs
+from h4bench.scenarios.campaign import check_same_campaign, provenance, run_many
+from h4bench.scenarios.campaign_build import campaign_experiment
+from h4bench.scenarios.campaign_report import summarise, write_outputs
 from h4bench.scenarios.rundir import OwnedFolder, save_run_files, write_json
 from h4bench.scenarios.spec import ScenarioError
 

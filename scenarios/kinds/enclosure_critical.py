@@ -1,7 +1,7 @@
 """Kind ``enclosure_critical``: a campaign whose enclosure check can fail.
 
 Every processed row's bound is a rigorous upper bound, rounded outward, of that row's own oracle residual
-``|y_k - W_k theta_true|`` (interval evaluation of ``W_k theta_true``, :func:`ident.numerics.interval.point_matmul`), so
+``|y_k - W_k theta_true|`` (interval evaluation of ``W_k theta_true``, :func:`ident.estimators.residuals.residual_bound`), so
 the true parameters are feasible but touch many strips and the feasible set is tiny: the boxes are orders of
 magnitude narrower than in the ordinary campaign, and any unsound rounding in an estimator (a safe bound that is
 not safe, a scaling that is not exact, a fallback that shrinks) shows as a miss. The bounds are derived from the
@@ -15,8 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from h4bench.ident.numerics.interval import down, point_matmul, up
-from h4bench.scenarios.campaign import campaign_experiment, run_many, summarise, write_outputs
+from h4bench.ident.estimators.residuals import residual_bound
+from h4bench.scenarios.campaign import run_many
+from h4bench.scenarios.campaign_build import campaign_experiment
+from h4bench.scenarios.campaign_report import summarise, write_outputs
 from h4bench.scenarios.experiment import estimate_boxes
 from h4bench.scenarios.spec import ScenarioError
 
@@ -24,19 +26,11 @@ DESCRIPTION = "row bounds = each row's own oracle residual, rounded outward: a t
 RESUMABLE = True
 
 
-def critical_bounds(W, y, theta) -> np.ndarray:
-    """Per row a float ``b_k >= |y_k - W_k theta|`` in exact arithmetic (outward-rounded interval evaluation)."""
-    lo, hi = point_matmul(np.asarray(W, float), np.asarray(theta, float))
-    y = np.asarray(y, float)
-    r_lo, r_hi = down(y - hi), up(y - lo)
-    return np.maximum(np.abs(r_lo), np.abs(r_hi))
-
-
 def critical_job(spec: dict, index: int, base_seed: int) -> dict:
     """One run: the ordinary experiment, then the estimators under the critical row bounds."""
     run_, shape = campaign_experiment(spec, index, base_seed, estimate=False)
     eq = run_.equation
-    bound = critical_bounds(eq.W, eq.y, run_.theta_true)
+    bound = residual_bound(eq.W, eq.y, run_.theta_true)  # rounded outward
     run_.equation = dataclasses.replace(eq, bound=bound)
     estimate_boxes(run_)
     result = run_.result()

@@ -16,7 +16,7 @@ from h4bench import ident
 from h4bench import sim
 from h4bench.ident.estimators.outliers import METHODS as OUTLIER_METHODS
 from h4bench.ident.estimators.outliers import OutlierBudgetError, relaxed_hull
-from h4bench.ident.processing.processing import build_equation
+from h4bench.ident.robots.h4_equation import build_equation
 from h4bench.scenarios import report
 from h4bench.scenarios.experiment import ExperimentRun, estimate_hull, run_experiment
 from h4bench.scenarios.rundir import save_run_files, sim_progress

@@ -114,7 +114,7 @@ def held_out_prediction(run_, seed: int, out: Path, progress=None, arrays: dict 
     arrays : a dict that receives the held-out rows and envelopes (``W``, ``y``, ``bound``, ``polytope``
     ``(lo, hi)``, ``box`` ``(lo, hi)``) when given. Returns the ``prediction`` entry of ``result.json``."""
     from h4bench.ident.estimators.envelope import envelope_lp
-    from h4bench.ident.numerics.interval import down, point_matvec, up
+    from h4bench.ident.estimators.residuals import box_envelope, covered
     from h4bench.scenarios.feasible import plot_prediction
 
     cfg = run_.spec["prediction"]
@@ -129,12 +129,8 @@ def held_out_prediction(run_, seed: int, out: Path, progress=None, arrays: dict 
     t1 = time.perf_counter()
     lo_p, hi_p, info = envelope_lp(eq.W, eq.y, eq.bound, hull.lower, hull.upper, W2)
     t_poly = time.perf_counter() - t1
-    lo_b, hi_b = point_matvec(W2, hull.lower, hull.upper)  # the box's envelope, rigorous (outward)
-
-    def coverage(lo, hi):
-        return (y2 >= down(lo - b2)) & (y2 <= up(hi + b2))
-
-    inside_p, inside_b = coverage(lo_p, hi_p), coverage(lo_b, hi_b)
+    lo_b, hi_b = box_envelope(W2, hull.lower, hull.upper)  # the box's envelope, rigorous (outward)
+    inside_p, inside_b = covered(y2, lo_p, hi_p, b2), covered(y2, lo_b, hi_b, b2)
     if arrays is not None:
         arrays.update(W=W2, y=y2, bound=b2, polytope=(lo_p, hi_p), box=(lo_b, hi_b))
     r_true = np.abs(y2 - W2 @ run_.theta_true)

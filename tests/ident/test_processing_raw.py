@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from h4bench import sim
-from h4bench.ident.processing import processing as pr
+from h4bench.ident.robots import h4_equation as pr
 from h4bench.ident.processing.filtering import ProcessingSettings
 from tests.conftest import run_experiment
 
@@ -49,3 +49,21 @@ def test_reused_rows_give_the_same_equation(geometry, dataset, monkeypatch):
     calls.clear()
     _same(pr.build_equation(geometry, dataset, 1.5, settings, block_samples=600, raw=raw), blocks)
     assert 1 <= len(calls) <= blocks.info["blocks"]
+
+
+def test_the_generic_chain_uses_the_regressor_it_is_given(geometry, dataset):
+    """The chain imports no robot: the regressor is an argument. Twice the H4's columns (exact in floating point,
+    and the FIR is linear with power-of-two scaling exact) give twice its W, the same y and rows."""
+    from h4bench.ident.processing import processing
+    from h4bench.ident.robots import h4
+
+    settings = ProcessingSettings(dt=dataset.dt, position_cutoff_hz=50.0, decimation=2, numtaps=41, fir_cutoff=0.04,
+                                  speed_threshold=0.5)
+    h4_eq = pr.build_equation(geometry, dataset, 1.5, settings)
+    names = tuple(f"2{n}" for n in h4.parameter_names("paper"))
+    doubled = processing.build_equation(lambda q, qd, qdd: 2.0 * h4.regressor(geometry, q, qd, qdd), names, dataset,
+                                        1.5, settings)
+    assert doubled.names == names
+    assert np.array_equal(doubled.W, 2.0 * h4_eq.W)
+    for name in ("y", "sample", "joint"):
+        assert np.array_equal(getattr(doubled, name), getattr(h4_eq, name)), name

@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 from h4bench import ident
 from h4bench import sim
 from h4bench.ident.processing.filtering import ProcessingSettings, derivatives, exclude_low_speed, parallel_filter
-from h4bench.ident.processing.processing import build_equation
+from h4bench.ident.robots.h4_equation import build_equation
 from h4bench.ident.robots.h4 import regressor
 from h4bench.scenarios.cli import _print_summary, app
 from h4bench.scenarios.spec import DEFAULTS

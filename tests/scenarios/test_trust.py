@@ -231,6 +231,37 @@ def test_workers_die_with_a_killed_campaign(tmp_path):
     assert not [w for w in workers if _alive(w)]
 
 
+def test_the_campaign_restores_the_process_hooks_it_replaces():
+    """SIGTERM's handler and threading.excepthook are the caller's again after a campaign's stop; the stop ends the
+    pool's workers (found without CPython's private pool attributes)."""
+    import concurrent.futures
+    import threading
+
+    def mine(signum, frame):
+        return None
+
+    old = signal.signal(signal.SIGTERM, mine)
+    try:
+        with camp._TermAsInterrupt():
+            assert signal.getsignal(signal.SIGTERM) is not mine
+        assert signal.getsignal(signal.SIGTERM) is mine
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    hook = threading.excepthook
+    known = camp._pool_children()
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=2)
+    futures = [pool.submit(time.sleep, 30) for _ in range(4)]
+    deadline = time.monotonic() + 20
+    while len(camp._pool_children() - known) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = camp._pool_children() - known
+    assert len(workers) == 2
+    t0 = time.monotonic()
+    camp._stop_executor(pool, known)
+    assert time.monotonic() - t0 < 10 and threading.excepthook is hook
+    assert not [w for w in workers if _alive(w)] and all(f.done() for f in futures)
+
+
 # ------------------------------------------------------------------------------------------ output channels
 def test_json_output_is_one_json_document(tmp_path):
     """Native solver banners must not reach stdout (HiGHS prints one from C at its first use)."""
