@@ -19,7 +19,6 @@ from __future__ import annotations
 import csv
 import math
 import os
-import time
 import tomllib
 from pathlib import Path
 
@@ -27,7 +26,6 @@ import numpy as np
 
 from h4bench import ident
 from h4bench import sim
-from h4bench.ident.errors import EstimatorError
 from h4bench.ident.estimators import registry
 from h4bench.ident.processing.filtering import ProcessingSettings
 from h4bench.ident.robots.h4_equation import BLOCK_SAMPLES, build_equation

@@ -256,7 +256,7 @@ class _Steps:
         # exactly (local Christoffel symbols), the q-q and q-v second order with local d/dq of dh/dv and Bernstein
         absJv = np.abs(Jv)
         absG = np.abs(gam)
-        mot, pos = self.ev_mot_max, self.ev_pos[j]
+        mot = self.ev_mot_max
         Q_all = np.einsum("abic,a,b->ic", absG, ev_max, ev_max)
         Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
         dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
