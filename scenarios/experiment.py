@@ -16,7 +16,7 @@ from h4bench import ident
 from h4bench import sim
 from h4bench.ident.processing.filtering import ProcessingSettings
 from h4bench.ident.robots.h4_equation import Equation, build_equation, raw_equation
-from h4bench.ident.estimators import registry
+from h4bench.ident.estimators import isolation, registry
 from h4bench.scenarios import judging
 from h4bench.scenarios.budget import error_budget
 from h4bench.scenarios.explain import width_analysis
@@ -296,12 +296,22 @@ def instruments(run: ExperimentRun) -> np.ndarray | None:
     return np.ascontiguousarray(ref.W[np.asarray(rows, dtype=np.int64)])
 
 
+def _takes(method, keyword: str) -> bool:
+    """Whether ``method`` declares the context ``keyword``, read without running a plugin's import code in this
+    process (:func:`ident.estimators.isolation.resolve`); a method that cannot be resolved takes nothing (it fails
+    by name when it is run)."""
+    try:
+        return keyword in isolation.resolve(method).estimator.context
+    except ident.EstimatorError:
+        return False
+
+
 def judge_methods(run: ExperimentRun, methods) -> None:
     """Run ``methods`` (and the exact hull as reference) on the run's equation through
     :func:`scenarios.judging.run_methods`; fills ``outcomes``, ``hull_ref``, ``boxes``, ``failures``, ``seconds``."""
     eq, prior = run.equation, run.prior
     # the instruments cost one more processing pass: built only for a method that may use them
-    needs = any(registry.takes(m, "instruments") for m in methods)
+    needs = any(_takes(m, "instruments") for m in methods)
     context = estimator_context(run) if needs else {"groups": np.asarray(run.equation.joint, dtype=np.int64)}
     outcomes, hull = judging.run_methods(list(methods), eq.W, eq.y, eq.bound, prior, context,
                                          timeout=run.spec["estimators"].get("method_timeout"))

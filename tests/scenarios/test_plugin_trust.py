@@ -198,3 +198,18 @@ def test_the_exit_3_bounds_per_joint_are_consistent(here):
     per = ",".join(repr(v) for v in sc["raw"])
     assert "per joint" in res.stderr and f"--bound {','.join(f'{v:.6g}' for v in sc['raw'])}" in res.stderr
     assert identify(here, "hull", bound=per, out="at4").returncode == 0
+
+
+def test_asking_a_plugin_for_its_context_does_not_import_it_here(tmp_path, monkeypatch):
+    """The experiment asks each method whether it takes the instruments; for a plugin the answer comes from a child
+    process, so its import code (here: a print) never runs in the campaign worker (whose stdout is the --json
+    document's)."""
+    from h4bench.scenarios import experiment
+    from tests.scenarios.plugin_cases import write_plugin
+
+    write_plugin(tmp_path, name="ctxprobe")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert experiment._takes("ctxprobe:shrunk", "instruments") is False
+    assert experiment._takes("iv", "instruments") is True
+    assert experiment._takes("nosuchmodule_xyz:f", "instruments") is False
+    assert "ctxprobe" not in sys.modules
