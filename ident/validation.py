@@ -12,7 +12,9 @@ import math
 
 import numpy as np
 
-__all__ = ["as_float_array", "check_finite", "positive", "positive_int"]
+from h4bench.checks import per_joint  # the n-joint check every layer shares
+
+__all__ = ["as_float_array", "check_finite", "per_joint", "positive", "positive_int"]
 
 
 def as_float_array(x, name: str) -> np.ndarray:
@@ -31,13 +33,13 @@ def check_finite(arr: np.ndarray, name: str) -> None:
         raise ValueError(f"{name} must be finite, got {np.count_nonzero(~np.isfinite(arr))} non-finite entries")
 
 
-def positive(x, name: str) -> float:
-    """A finite real number > 0."""
+def positive(x, name: str, *, allow_zero: bool = False) -> float:
+    """A finite real number > 0 (``>= 0`` with ``allow_zero``)."""
     if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a real number, got {type(x).__name__}")
     x = float(x)
-    if not (math.isfinite(x) and x > 0):
-        raise ValueError(f"{name} must be a finite number > 0, got {x}")
+    if not (math.isfinite(x) and (x >= 0 if allow_zero else x > 0)):
+        raise ValueError(f"{name} must be a finite number {'>= 0' if allow_zero else '> 0'}, got {x}")
     return x
 
 

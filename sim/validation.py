@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from h4bench.checks import per_joint, vector  # the checks every layer shares (numpy only)
+
 N_JOINTS = 4  # the H4's four actuated joints: the one definition in sim (the other modules import it)
 
 __all__ = ["N_JOINTS", "SimulationError", "as_float_array", "axis_array", "check_finite", "joint_array",
@@ -138,56 +140,12 @@ def joint_array(x, name: str = "q") -> np.ndarray:
 
 
 def joint_vector(x, name: str) -> np.ndarray:
-    """A finite float array of shape (4,).
-
-    Parameters
-    ----------
-    x : the value
-    name : the argument's name, for the message
-
-    Returns
-    -------
-    (4,) float ndarray
-    """
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name} must be an array of shape ({N_JOINTS},), got {type(x).__name__}")
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be an array of shape ({N_JOINTS},), got {type(x).__name__}") from exc
-    if arr.shape != (N_JOINTS,):
-        raise ValueError(f"{name} must have shape ({N_JOINTS},), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr}")
-    return arr
+    """A finite float array of shape (4,) (:func:`h4bench.checks.vector` with n = 4)."""
+    return vector(x, name, N_JOINTS)
 
 
 def axis_array(x, name: str, *, allow_zero: bool) -> np.ndarray:
-    """A scalar (broadcast) or (4,) array, finite and > 0 (``>= 0`` with ``allow_zero``).
+    """A scalar (broadcast) or (4,) array, finite and > 0 (``>= 0`` with ``allow_zero``): the H4's four axes
+    (:func:`h4bench.checks.per_joint` with n = 4)."""
+    return per_joint(x, name, N_JOINTS, allow_zero=allow_zero)
 
-    Parameters
-    ----------
-    x : the value
-    name : the argument's name, for the message
-    allow_zero : accept zeros
-
-    Returns
-    -------
-    (4,) float ndarray
-    """
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name} must be a number or an array of shape ({N_JOINTS},), got {type(x).__name__}")
-    try:
-        arr = np.asarray(x, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a number or an array of shape ({N_JOINTS},), "
-                        f"got {type(x).__name__}") from exc
-    if arr.ndim == 0:
-        arr = np.full(N_JOINTS, float(arr))
-    if arr.shape != (N_JOINTS,):
-        raise ValueError(f"{name} must be a scalar or have shape ({N_JOINTS},), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr}")
-    if np.any(arr < 0) if allow_zero else np.any(arr <= 0):
-        raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {arr}")
-    return arr

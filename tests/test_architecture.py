@@ -262,3 +262,11 @@ def test_every_file_imports_the_packages_under_h4bench():
                 [node.module] if isinstance(node, ast.ImportFrom) and node.module and not node.level else [])
             found += [f"{path.relative_to(ROOT)}:{node.lineno} {n}" for n in names if n.split(".")[0] in old]
     assert found == []
+
+
+def test_the_shared_checks_sit_below_every_layer():
+    """``h4bench.checks`` is imported by sim and ident alike, so it imports nothing of the project's own."""
+    tree = ast.parse((ROOT / "h4bench" / "checks.py").read_text())
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+    assert imported <= {"__future__", "numpy"}, imported

@@ -37,12 +37,13 @@ an optional sub-table ``[error_model.sources]``.
 
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from h4bench.ident.validation import per_joint, positive
 
 __all__ = ["ErrorSpec", "ErrorSpecError"]
 
@@ -58,25 +59,17 @@ class ErrorSpecError(ValueError):
 
 
 def _per_joint(value, name: str, n: int, *, allow_zero: bool = True) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 0:
-        arr = np.full(n, float(arr))
-    if arr.shape != (n,):
-        raise ErrorSpecError(f"{name} must be one number or {n} (one per joint), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ErrorSpecError(f"{name} must be finite, got {arr.tolist()}")
-    if np.any(arr < 0) or (not allow_zero and np.any(arr == 0)):
-        raise ErrorSpecError(f"{name} must be {'>= 0' if allow_zero else '> 0'} per joint, got {arr.tolist()}")
-    return arr
+    try:
+        return per_joint(value, name, n, allow_zero=allow_zero)
+    except (TypeError, ValueError) as exc:
+        raise ErrorSpecError(str(exc)) from None
 
 
 def _positive(value, name: str, *, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ErrorSpecError(f"{name} must be a number, got {type(value).__name__}")
-    v = float(value)
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ErrorSpecError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
-    return v
+    try:
+        return positive(value, name, allow_zero=allow_zero)
+    except (TypeError, ValueError) as exc:
+        raise ErrorSpecError(str(exc)) from None
 
 
 @dataclass(frozen=True, eq=False)

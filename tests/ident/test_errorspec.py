@@ -35,9 +35,9 @@ def test_counts_per_turn_give_the_resolution(tmp_path):
 
 
 @pytest.mark.parametrize(("kw", "match"), [
-    ({"torque_error": [1, 2]}, "torque_error must be one number or 4"),
-    ({"qd_max": -1.0}, "qd_max must be > 0"),
-    ({"sample_period": 0.0}, "sample_period must be finite and > 0"),
+    ({"torque_error": [1, 2]}, r"torque_error must be a scalar or have shape \(4,\), got \(2,\)"),
+    ({"qd_max": -1.0}, "qd_max must be > 0, got"),
+    ({"sample_period": 0.0}, "sample_period must be a finite number > 0"),
     ({"significant_digits": 5}, "exactly one of position_resolution"),
     ({"latency": 1e-3}, "needs torque_rate"),
     ({"torque_timing": "late"}, "torque_timing must be one of"),
@@ -67,3 +67,10 @@ def test_significant_digits_bound_covers_the_written_values():
     bound = spec.position_error(written)
     assert np.all(np.abs(written - true) <= bound)
     assert np.max(np.abs(written - true) / bound) > 0.9  # not loose: some values use most of their half unit
+
+
+def test_a_value_that_is_not_a_number_is_an_error_spec_error():
+    with pytest.raises(ErrorSpecError, match=r"qdd_max must be a number or an array of shape \(4,\), got str"):
+        _spec(qdd_max="fast")
+    with pytest.raises(ErrorSpecError, match="latency must be a real number, got str"):
+        _spec(latency="1 ms")
