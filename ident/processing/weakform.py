@@ -185,18 +185,18 @@ def coulomb_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max):
 
 
 def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_max, qdd_max, curvature,
-                      fd_step: tuple[float, float] = (1e-6, 1e-3), chunk: int = 512):
+                      chunk: int = 512):
     """Columns ``dP/dt + F`` with configuration-dependent ``P(q, qd)``, ``F(q, qd)`` (n_out outputs, nc columns).
 
-    evaluate : ``f(q_m (S, n_j), v (S, n_j)) -> (P, F)``, each (S, n_out, nc), vectorised over steps.
+    evaluate : ``f(q_m (S, n_j), v (S, n_j)) -> (P, F)``, each a first-order :class:`~ident.numerics.jets.Jet`
+    of value shape (S, n_out, nc) in the 2 n_j variables (q, qd): rigorous enclosures of the values and the
+    gradients at the measured secant states (e.g. :func:`ident.robots.h4_jets.nacelle_jets`).
     q, e : (n, n_j) measured positions and their error bounds [rad]; qd_max, qdd_max (n_j,) stated motion bounds;
     curvature : (MP, MF), each (n_out, nc, 2 n_j, 2 n_j) or per step (S, n_out, nc, 2 n_j, 2 n_j), bounds of ``|d^2 P / dx_a dx_b|``, ``|d^2 F / ...|`` over
     ``x = (q, qd)`` near the motion (see :func:`ident.robots.h4_certified.curvature_bounds`: sampled, NOT proven).
-    fd_step : central-difference steps in q [rad] and v [rad/s] for the gradient (v: exact for P linear and F
-    quadratic in qd).
 
     Returns (value, meas, trunc, second), each (R, n_out, nc): the centre; the first-order encoder radius
-    ``sum_u |dPhi / dq_u| e_u`` (the exact gradient of the row functional, to differencing error); the
+    ``sum_u |dPhi / dq_u| e_u`` (the gradient of the row functional, enclosed) plus the enclosures' own radii; the
     truncation radius (chord remainder, linear terms exactly integrated, second-order remainder over the step's
     motion box); the encoder's second-order term. ``second`` and the second-order part of ``trunc`` rest on
     ``curvature``.
@@ -204,20 +204,11 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     h = kernel.h
     qm, v = _secant(q, h)
     S, nj = qm.shape
-    P, F = evaluate(qm, v)
+    Pj, Fj = evaluate(qm, v)
+    P, F = Pj.v.c, Fj.v.c
     n_out, nc = P.shape[1:]
-    Pq, Pv, Fq, Fv = (np.empty(P.shape + (nj,)) for _ in range(4))
-    dq, dv = fd_step
-    for a in range(nj):
-        for arr_p, arr_f, step, which in ((Pq, Fq, dq, 0), (Pv, Fv, dv, 1)):
-            d = np.zeros((S, nj))
-            d[:, a] = step
-            args_p = (qm + d, v) if which == 0 else (qm, v + d)
-            args_m = (qm - d, v) if which == 0 else (qm, v - d)
-            p1, f1 = evaluate(*args_p)
-            p0, f0 = evaluate(*args_m)
-            arr_p[..., a] = (p1 - p0) / (2 * step)
-            arr_f[..., a] = (f1 - f0) / (2 * step)
+    Pq, Pv, Fq, Fv = Pj.g.c[..., :nj], Pj.g.c[..., nj:], Fj.g.c[..., :nj], Fj.g.c[..., nj:]
+    Pq_r, Pv_r, Fq_r, Fv_r = Pj.g.r[..., :nj], Pj.g.r[..., nj:], Fj.g.r[..., :nj], Fj.g.r[..., nj:]
     MP, MF = (np.broadcast_to(np.asarray(m, dtype=float), (S, n_out, nc, 2 * nj, 2 * nj)) for m in curvature)
     qdd_max = np.asarray(qdd_max, dtype=float)
     # gradients at the measured secant state, widened to cover the true one (|q_m error| <= e_m, |v error| <= e_v)
@@ -237,9 +228,9 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     QF_sup = 0.5 * np.einsum("sicab,sa,sb->sic", MF, d_sup, d_sup)
     gP = np.einsum("sicab,sb->sica", MP, eps)  # (S, n_out, nc, 2 n_j)
     gF = np.einsum("sicab,sb->sica", MF, eps)
-    aPq = np.abs(Pq) + gP[..., :nj]
-    aFq = np.abs(Fq) + gF[..., :nj]
-    aFv = np.abs(Fv) + gF[..., nj:]
+    aPq = np.abs(Pq) + Pq_r + gP[..., :nj]
+    aFq = np.abs(Fq) + Fq_r + gF[..., :nj]
+    aFv = np.abs(Fv) + Fv_r + gF[..., nj:]
     # per-step truncation pieces (S, n_out, nc): coefficient of |s_w| and of |k_mid,w|
     t_s = (np.einsum("sica,a->sic", aPq, qdd_max) * h**3 / 12 + h * QP
            + np.einsum("sica,sa->sic", aFq, qd_step) * h**3 / 12 + np.einsum("sica,a->sic", aFq, qdd_max) * h**4 / 32
@@ -252,6 +243,9 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     # derivative of step j's term with respect to q_j (A) and q_j+1 (B), per unit weight
     dPa, dPb = 0.5 * Pq - Pv / h, 0.5 * Pq + Pv / h
     dFa, dFb = 0.5 * Fq - Fv / h, 0.5 * Fq + Fv / h
+    # the enclosures' radii: of the values (per step) and of the gradients (per step and variable)
+    rPa, rFa = 0.5 * Pq_r + Pv_r / h, 0.5 * Fq_r + Fv_r / h  # the same for A and B
+    mPa, mFa = 0.5 * np.abs(Pq) + np.abs(Pv) / h, 0.5 * np.abs(Fq) + np.abs(Fv) / h  # magnitudes for rounding
     R = windows.start.size
     L = kernel.steps
     value = np.empty((R, n_out, nc))
@@ -262,13 +256,27 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
         value[r0:r0 + chunk] = -h * np.einsum("w,rwic->ric", s, gPw) + np.einsum("w,rwic->ric", K, gFw)
         fp = dot_error(h * np.einsum("w,rwic->ric", np.abs(s), np.abs(gPw))
                        + np.einsum("w,rwic->ric", np.abs(K), np.abs(gFw)), 2 * L)
+        fp = fp + (h * np.einsum("w,rwic->ric", np.abs(s), sub.gather(Pj.v.r))
+                   + np.einsum("w,rwic->ric", np.abs(K), sub.gather(Fj.v.r))) * (1 + 4 * L * 2.0**-53)
         A = -h * np.einsum("w,rwica->rwica", s, sub.gather(dPa)) + np.einsum("w,rwica->rwica", K, sub.gather(dFa))
         B = -h * np.einsum("w,rwica->rwica", s, sub.gather(dPb)) + np.einsum("w,rwica->rwica", K, sub.gather(dFb))
         grad = np.zeros((A.shape[0], L + 1) + A.shape[2:])
         grad[:, :L] += A
         grad[:, 1:] += B
+        gr = h * np.einsum("w,rwica->rwica", np.abs(s), sub.gather(rPa)) + np.einsum(
+            "w,rwica->rwica", np.abs(K), sub.gather(rFa))
+        grad_r = np.zeros_like(grad)
+        grad_r[:, :L] += gr
+        grad_r[:, 1:] += gr
         ew = sub.gather_knots(e)  # (r, L + 1, n_j)
-        meas[r0:r0 + chunk] = up(np.einsum("ruica,rua->ric", np.abs(grad), ew) + fp)
+        # the float error of grad (under 8 operations per entry): 32 u times the magnitudes of its pieces
+        sl = h * np.einsum("w,rwica->rwica", np.abs(s), sub.gather(mPa)) + np.einsum(
+            "w,rwica->rwica", np.abs(K), sub.gather(mFa))
+        slack = np.zeros_like(grad)
+        slack[:, :L] += sl
+        slack[:, 1:] += sl
+        bound_g = np.abs(grad) + grad_r + 32 * 2.0**-53 * slack
+        meas[r0:r0 + chunk] = up(np.einsum("ruica,rua->ric", bound_g, ew) * (1 + 4 * L * 2.0**-53) + fp)
         trunc[r0:r0 + chunk] = (np.einsum("w,rwic->ric", np.abs(s), sub.gather(t_s))
                                 + np.einsum("w,rwic->ric", np.abs(km), sub.gather(t_k)))
         second[r0:r0 + chunk] = (h * np.einsum("w,rwic->ric", np.abs(s), sub.gather(s2P))

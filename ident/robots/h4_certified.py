@@ -11,12 +11,15 @@ The weak form of :mod:`ident.processing.weakform` applied to the H4 model of :mo
 * ``Fv_i``: ``F = qd_i``; ``Fs_i``: ``F = sign(qd_i)``, certain or the interval [-1, 1] step by step.
 
 What is proven and what is not (``CertifiedEquation.info["not_proven"]``): the torque side, the Imot, Fv and Fs
-columns and the first-order terms of Mnac and Ibc are bounded from the ErrorSpec alone. The second-order
-remainders of the Mnac and Ibc columns (the variation of J(q), Jd(q, qd) within one sample step, and the
-encoder's second-order effect) rest on bounds of the second derivatives of P and F that are SAMPLED (central
-differences at a subsample of the measured steps, maximum times :data:`CURVATURE_FACTOR`), not proven by
-interval evaluation; the gradients of P and F are central differences (error of order step^2). Their share of
-the radius is reported (``terms``), so that what rests on them is visible.
+columns and the first-order terms of Mnac and Ibc are bounded from the ErrorSpec alone; the values and gradients of
+P and F at the measured secant states are rigorous enclosures (interval jets through a Krawczyk-verified nacelle
+pose, :mod:`ident.robots.h4_jets`). The second-order remainders of the Mnac and Ibc columns (the variation of
+J(q), Jd(q, qd) within one sample step, and the encoder's second-order effect) rest on bounds of the second
+derivatives of P and F that are SAMPLED (central differences at a subsample of the measured steps, maximum times
+:data:`CURVATURE_FACTOR`), not proven: the interval jets of :mod:`ident.robots.h4_jets` do enclose them over each
+step's box, but naive interval evaluation overestimates them by orders of magnitude at the boxes a step spans
+(about 1e-3 rad and 0.3 rad/s; :func:`ident.robots.h4_jets.hessian_overestimation` measures it). Their share of the
+radius is reported (``terms``), so that what rests on them is visible.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from h4bench.ident.processing.weakform import (coulomb_columns, imot_columns, ma
                                                row_windows, torque_rows, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
+from h4bench.ident.robots.h4_jets import point_jets
 
 __all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "Processing", "certified_equation", "curvature_bounds",
            "nacelle_terms"]
@@ -170,9 +174,8 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     qm = 0.5 * (q[:-1] + q[1:])
     pose = np.atleast_2d(forward_kinematics(geometry, qm))
 
-    def evaluate(a, b):  # the secant poses when q_m is not perturbed, else a warm start from them
-        same = np.array_equal(a, qm)
-        return nacelle_terms(geometry, a, b, x=pose if same else None, x0=None if same else pose)
+    def evaluate(a, b):  # rigorous values and gradients at the measured secant states
+        return point_jets(geometry, a, b, pose)
 
     value, meas, trunc, second = nonlinear_columns(evaluate, q, e, windows, kernel, spec.qd_max, spec.qdd_max, curv)
     cols["value"][..., 4:6] = value
@@ -195,8 +198,7 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
             "sign_uncertain_steps": int(sign_uncertain.sum()), "steps": int(q.shape[0] - 1),
             "curvature_factor": CURVATURE_FACTOR, "curvature_every": processing.curvature_every,
             "not_proven": ["second_order (Mnac, Ibc): sampled second-derivative bounds x "
-                           f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds",
-                           "gradients of the Mnac, Ibc per-step functions by central differences"]}
+                           f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds"]}
     return CertifiedEquation(Wc=cols["value"].reshape(m, p), D=D, y=y.reshape(m), bound=bound,
                              sample=np.repeat(windows.centre, N_JOINTS), joint=np.tile(joint, R), info=info,
                              names=PARAMETER_NAMES, terms=terms)

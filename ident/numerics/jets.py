@@ -1,0 +1,340 @@
+"""Rigorous second-order automatic differentiation over boxes: interval jets in midpoint-radius form.
+
+A :class:`Jet` of order ``k`` (0, 1 or 2) holds, for a function ``f`` of ``n`` variables ``z`` and a box ``Z``,
+enclosures of ``f(z)`` (``v``), of its gradient (``g``, trailing axis n) and of its Hessian (``h``, trailing
+axes n, n) that hold for EVERY ``z`` in ``Z``: forward-mode differentiation whose every operation is evaluated
+in interval arithmetic encloses the pointwise chain rule, because each pointwise value lies in the operand's
+interval. Arrays carry leading axes of their own (samples, vectors, matrices); the derivative axes are last.
+
+Intervals are stored as midpoint and radius (:class:`MR`): ``<c, r> = [c - r, c + r]``. Every operation
+computes the midpoint in floating point and a radius that covers (a) the operands' radii (the midpoint-radius
+product of Rump, BIT 39 (1999): ``|a c| rb + ra (|bc| + rb)``), (b) the rounding error of the midpoint (``u |c|``
+for one operation; ``gamma_n |a|^T |b|`` for an ``n``-term sum in any order, Higham sec. 3.1) and (c) the rounding
+of the radius formula itself (a relative factor ``1 + (k + 2) 2u`` for ``k`` nonnegative operations, and an
+absolute ``1e-300`` for underflow). The elementary functions ``sin`` and ``cos`` use numpy's, taken to be within
+:data:`LIBM_ULPS` units in the last place (glibc's and numpy's SIMD double-precision sin/cos are documented within
+4 ulp), and their Lipschitz constant 1.
+
+The interval inverse of a matrix uses the preconditioned Neumann bound: with ``C ~ mid(M)^-1`` and
+``E = I - C M``, ``||E||_inf <= beta < 1`` gives ``M^-1 = (I + E + R) C`` with ``|R_ij| <= beta^2 / (1 - beta)``
+for every ``M`` in the interval matrix (the error of the floating-point ``C`` only enters through ``E``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from h4bench.ident.numerics.interval import U, up
+
+__all__ = ["LIBM_ULPS", "MR", "Jet", "SingularIntervalMatrix", "inverse"]
+
+LIBM_ULPS = 4  # stated accuracy of numpy's float64 sin / cos [ulp]
+_TINY = 1e-300
+_ONE = 1.0 + 16 * U  # covers the rounding of a radius formula of up to 6 nonnegative operations
+
+
+class SingularIntervalMatrix(ArithmeticError):
+    """An interval matrix could not be proven regular (the preconditioned Neumann bound is >= 1)."""
+
+
+def _gamma(n: int) -> float:
+    return 2.0 * (n + 2) * U
+
+
+class MR:
+    """An interval array in midpoint-radius form: ``c`` and ``r >= 0`` of one shape."""
+
+    __slots__ = ("c", "r")
+
+    def __init__(self, c, r=None):
+        self.c = np.asarray(c, dtype=float)
+        self.r = np.zeros_like(self.c) if r is None else np.asarray(r, dtype=float)
+
+    @classmethod
+    def from_bounds(cls, lo, hi) -> MR:
+        lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        c = 0.5 * (lo + hi)
+        return cls(c, up(np.maximum(hi - c, c - lo)))
+
+    @staticmethod
+    def stack(parts: list, axis: int = -1) -> MR:
+        return MR(np.stack([p.c for p in parts], axis=axis), np.stack([p.r for p in parts], axis=axis))
+
+    @property
+    def shape(self) -> tuple:
+        return self.c.shape
+
+    @property
+    def lo(self) -> np.ndarray:
+        return self.c - up(self.r + U * np.abs(self.c) * 2 + _TINY)
+
+    @property
+    def hi(self) -> np.ndarray:
+        return self.c + up(self.r + U * np.abs(self.c) * 2 + _TINY)
+
+    def mag(self) -> np.ndarray:
+        """An upper bound of ``|x|`` over the interval."""
+        return up(up(np.abs(self.c) + self.r) * _ONE)
+
+    def __getitem__(self, key) -> MR:
+        return MR(self.c[key], self.r[key])
+
+    def __neg__(self) -> MR:
+        return MR(-self.c, self.r)
+
+    def __add__(self, other) -> MR:
+        o = _mr(other)
+        c = self.c + o.c
+        return MR(c, (self.r + o.r + U * np.abs(c)) * _ONE + _TINY)
+
+    __radd__ = __add__
+
+    def __sub__(self, other) -> MR:
+        return self + (-_mr(other))
+
+    def __rsub__(self, other) -> MR:
+        return _mr(other) + (-self)
+
+    def __mul__(self, other) -> MR:
+        o = _mr(other)
+        c = self.c * o.c
+        r = np.abs(self.c) * o.r + self.r * (np.abs(o.c) + o.r) + U * np.abs(c)
+        return MR(c, r * _ONE + _TINY)
+
+    __rmul__ = __mul__
+
+    def sin(self) -> MR:
+        c = np.sin(self.c)
+        return MR(c, (self.r + 2 * LIBM_ULPS * U * np.abs(c)) * _ONE + _TINY)
+
+    def cos(self) -> MR:
+        c = np.cos(self.c)
+        return MR(c, (self.r + 2 * LIBM_ULPS * U * np.abs(c)) * _ONE + _TINY)
+
+    def contains(self, x) -> np.ndarray:
+        return (self.lo <= x) & (x <= self.hi)
+
+
+def _mr(x) -> MR:
+    return x if isinstance(x, MR) else MR(x)
+
+
+def _terms(spec: str, a_shape: tuple, b_shape: tuple) -> int:
+    """The number of terms each output element of ``einsum(spec, a, b)`` sums (contracted index sizes)."""
+    ins, out = spec.split("->")
+    sa, sb = ins.split(",")
+    sizes = {}
+    for s, shape in ((sa, a_shape), (sb, b_shape)):
+        letters = s.replace("...", "")
+        for letter, size in zip(letters, shape[len(shape) - len(letters):]):
+            sizes[letter] = size
+    n = 1
+    for letter, size in sizes.items():
+        if letter not in out:
+            n *= size
+    return n
+
+
+def ein(spec: str, a, b) -> MR:
+    """``einsum(spec, a, b)`` of two interval (or float) arrays, enclosed (any summation order)."""
+    a, b = _mr(a), _mr(b)
+    n = _terms(spec, a.shape, b.shape)
+    c = np.einsum(spec, a.c, b.c)
+    aa, ab = np.abs(a.c), np.abs(b.c)
+    r = np.einsum(spec, aa, b.r) + np.einsum(spec, a.r, ab + b.r)
+    r = r + _gamma(n) * np.einsum(spec, aa, ab)
+    return MR(c, r * (1.0 + 3 * _gamma(n)) + _TINY)
+
+
+def inverse(m: MR) -> MR:
+    """An enclosure of ``M^-1`` for every M in the interval matrices ``m`` (..., k, k) (module docstring).
+
+    Raises :class:`SingularIntervalMatrix` naming how many matrices could not be proven regular."""
+    k = m.shape[-1]
+    try:
+        C = np.linalg.inv(m.c)
+    except np.linalg.LinAlgError:  # a singular midpoint: any C is valid, the test below then refuses it
+        C = np.linalg.pinv(m.c)
+    eye = np.eye(k)
+    E = MR(eye) - ein("...ij,...jk->...ik", C, m)
+    beta = up(np.max(np.sum(E.mag(), axis=-1), axis=-1) * _ONE)
+    bad = ~(beta < 0.75)
+    if np.any(bad):
+        raise SingularIntervalMatrix(
+            f"{int(bad.sum())} interval matrices could not be proven regular (preconditioned Neumann bound "
+            f"||I - C M|| = {float(np.max(beta)):.3g} >= 0.75): the box is too wide or near a singular pose")
+    rho = up(up(beta * beta) / (1.0 - beta) * _ONE)  # 1 - beta: one rounding, covered by _ONE
+    ic = eye + E.c
+    inner = MR(ic, (E.r + U * np.abs(ic) + rho[..., None, None]) * _ONE + _TINY)
+    return ein("...ij,...jk->...ik", inner, C)
+
+
+class Jet:
+    """Value ``v`` (..., ), gradient ``g`` (..., n) and Hessian ``h`` (..., n, n) enclosures (:class:`MR`) over a
+    box; ``order`` 0, 1 or 2 says which are tracked (the others are None)."""
+
+    __slots__ = ("v", "g", "h")
+
+    def __init__(self, v: MR, g: MR | None = None, h: MR | None = None):
+        self.v, self.g, self.h = v, g, h
+
+    @property
+    def order(self) -> int:
+        return 0 if self.g is None else (1 if self.h is None else 2)
+
+    @property
+    def shape(self) -> tuple:
+        return self.v.shape
+
+    @classmethod
+    def variables(cls, box: MR, n: int, first: int, order: int) -> Jet:
+        """Independent variables ``z_first .. z_first + m - 1`` (box (..., m)) among n, as a jet of ``order``."""
+        m = box.shape[-1]
+        if order == 0:
+            return cls(box)
+        seed = np.zeros(box.shape + (n,))
+        seed[..., np.arange(m), first + np.arange(m)] = 1.0
+        h = MR(np.zeros(box.shape + (n, n))) if order == 2 else None
+        return cls(box, MR(seed), h)
+
+    @classmethod
+    def constant(cls, value, like: Jet) -> Jet:
+        """A constant (float or MR array) as a jet of ``like``'s order and variable count."""
+        v = _mr(value)
+        if like.order == 0:
+            return cls(v)
+        n = like.g.shape[-1]
+        g = MR(np.zeros(v.shape + (n,)))
+        h = MR(np.zeros(v.shape + (n, n))) if like.order == 2 else None
+        return cls(v, g, h)
+
+    def __getitem__(self, key) -> Jet:
+        key = key if isinstance(key, tuple) else (key,)
+        full = slice(None)
+        return Jet(self.v[key], None if self.g is None else self.g[key + (full,)],
+                   None if self.h is None else self.h[key + (full, full)])
+
+    def __neg__(self) -> Jet:
+        return Jet(-self.v, None if self.g is None else -self.g, None if self.h is None else -self.h)
+
+    def __add__(self, other) -> Jet:
+        if not isinstance(other, Jet):
+            return Jet(self.v + other, self.g, self.h)
+        return Jet(self.v + other.v, None if self.g is None else self.g + other.g,
+                   None if self.h is None else self.h + other.h)
+
+    __radd__ = __add__
+
+    def __sub__(self, other) -> Jet:
+        return self + (-other)
+
+    def __rsub__(self, other) -> Jet:
+        return (-self) + other
+
+    def __mul__(self, other) -> Jet:
+        """Elementwise product (numpy broadcasting of the value axes) with a jet, MR or float array."""
+        if not isinstance(other, Jet):
+            o = _mr(other)
+            return Jet(self.v * o, None if self.g is None else self.g * o[..., None],
+                       None if self.h is None else self.h * o[..., None, None])
+        a, b = self, other
+        v = a.v * b.v
+        if a.g is None:
+            return Jet(v)
+        g = a.g * b.v[..., None] + b.g * a.v[..., None]
+        if a.h is None:
+            return Jet(v, g)
+        cross = a.g[..., :, None] * b.g[..., None, :]
+        h = a.h * b.v[..., None, None] + b.h * a.v[..., None, None] + cross + _transpose(cross)
+        return Jet(v, g, h)
+
+    __rmul__ = __mul__
+
+    def sin(self) -> Jet:
+        s = self.v.sin()
+        if self.g is None:
+            return Jet(s)
+        c = self.v.cos()
+        g = self.g * c[..., None]
+        if self.h is None:
+            return Jet(s, g)
+        return Jet(s, g, self.h * c[..., None, None] - (self.g[..., :, None] * self.g[..., None, :]) * s[..., None, None])
+
+    def cos(self) -> Jet:
+        c = self.v.cos()
+        if self.g is None:
+            return Jet(c)
+        s = self.v.sin()
+        g = -(self.g * s[..., None])
+        if self.h is None:
+            return Jet(c, g)
+        return Jet(c, g, -(self.h * s[..., None, None]) - (self.g[..., :, None] * self.g[..., None, :]) * c[..., None, None])
+
+    @staticmethod
+    def stack(jets: list, axis: int = -1) -> Jet:
+        """Stack jets of one order along a new LAST value axis (``axis`` must be -1)."""
+        if axis != -1:
+            raise ValueError(f"axis must be -1 (a new last value axis), got {axis}")
+
+        def st(parts, ax):
+            return MR(np.stack([p.c for p in parts], axis=ax), np.stack([p.r for p in parts], axis=ax))
+
+        order = jets[0].order
+        return Jet(st([j.v for j in jets], -1), st([j.g for j in jets], -2) if order >= 1 else None,
+                   st([j.h for j in jets], -3) if order == 2 else None)
+
+
+def _transpose(m: MR) -> MR:
+    return MR(np.swapaxes(m.c, -1, -2), np.swapaxes(m.r, -1, -2))
+
+
+def jet_ein(spec: str, a, b) -> Jet:
+    """``einsum(spec, a, b)`` for jets (or a jet and a constant float / MR array); spec over the value axes with
+    a leading ``...`` (e.g. ``"...ij,...j->...i"``), lower-case letters only."""
+    if not isinstance(a, Jet):
+        return _const_ein(spec, a, b, left=True)
+    if not isinstance(b, Jet):
+        return _const_ein(spec, b, a, left=False)
+    ins, out = spec.split("->")
+    sa, sb = ins.split(",")
+    v = ein(spec, a.v, b.v)
+    if a.g is None:
+        return Jet(v)
+    g = ein(f"{sa}Y,{sb}->{out}Y", a.g, b.v) + ein(f"{sa},{sb}Y->{out}Y", a.v, b.g)
+    if a.h is None:
+        return Jet(v, g)
+    cross = ein(f"{sa}Y,{sb}Z->{out}YZ", a.g, b.g)
+    h = (ein(f"{sa}YZ,{sb}->{out}YZ", a.h, b.v) + ein(f"{sa},{sb}YZ->{out}YZ", a.v, b.h) + cross
+         + _transpose(cross))
+    return Jet(v, g, h)
+
+
+def _const_ein(spec, const, jet: Jet, left: bool) -> Jet:
+    ins, out = spec.split("->")
+    sa, sb = ins.split(",")
+
+    def one(suffix, part):
+        return (ein(f"{sa},{sb}{suffix}->{out}{suffix}", const, part) if left
+                else ein(f"{sa}{suffix},{sb}->{out}{suffix}", part, const))
+
+    return Jet(one("", jet.v), None if jet.g is None else one("Y", jet.g),
+               None if jet.h is None else one("YZ", jet.h))
+
+
+def jet_inverse(m: Jet) -> Jet:
+    """The jet of ``M^-1`` for a jet of square matrices (..., k, k): ``Y = M^-1``, ``Y_a = -Y M_a Y``,
+    ``Y_ab = -(T_a Y_b + T_b Y_a) - Y M_ab Y`` with ``T_a = Y M_a``."""
+    y = inverse(m.v)
+    if m.g is None:
+        return Jet(y)
+    t = ein("...ij,...jkY->...ikY", y, m.g)
+    g = -ein("...ikY,...kl->...ilY", t, y)
+    if m.h is None:
+        return Jet(y, g)
+    cross = ein("...ikY,...klZ->...ilYZ", t, g)
+    ymh = ein("...ij,...jkYZ->...ikYZ", y, m.h)
+    h = -(cross + _transpose(cross)) - ein("...ikYZ,...kl->...ilYZ", ymh, y)
+    return Jet(y, g, h)
+
+
+__all__ += ["jet_ein", "jet_inverse", "ein"]

@@ -1,0 +1,181 @@
+"""Rigorous enclosures of the H4's nacelle terms and their first and second derivatives over boxes of (q, qd).
+
+The Mnac and Ibc columns of the weak form (:mod:`ident.robots.h4_certified`) need, on every sample step, the
+per-step functions ``P(q, qd)`` and ``F(q, qd)`` with their gradients at the measured secant state and bounds of
+their Hessians over the box that holds the measured and the true states of the step. This module computes them
+by interval jets (:mod:`ident.numerics.jets`), so nothing is sampled:
+
+* **the pose** ``x(q)`` (implicit: the loop closures ``G_i(x, q) = |B_i(q_i) - A_i(x)|^2 - l_i^2 = 0``) is
+  enclosed over the box Q by the parametric Krawczyk test ``K(X) = x^ - C G(x^, Q) + (I - C G_x(X, Q)) (X - x^)
+  subset int X`` (x^ the floating-point forward kinematics of the box's centre, ``C ~ G_x(x^)^-1``): then for
+  every q in Q the loop closure has exactly one solution in X, and it lies in K(X). That solution is the
+  nacelle pose of the assembly mode the forward kinematics found (an assumption of the whole weak form: the
+  robot stays in the assembly mode the measured positions' forward kinematics gives);
+* **its derivatives**: ``x_q = J = -G_x^-1 G_q = Jx^-1 diag(Jq)`` over (K(X), Q), and ``x_qq`` from the second
+  derivative of ``G(x(q), q) = 0``: ``G_x x_ab + T_ab = 0`` where ``T`` is the Hessian of G computed with x's
+  Hessian set to zero, so ``x_ab = (2 Jx)^-1 T_ab`` (``G_x = -2 Jx``);
+* **P and F** (:func:`ident.robots.h4_certified.nacelle_terms`, the same formulas: xd = J qd, Jd from the
+  derivatives of the loop-closure rows) evaluated in jet arithmetic with ``q``, ``qd`` the independent
+  variables and ``x`` the jet above.
+
+Geometry constants are taken as the floating-point numbers of :class:`sim.H4Geometry` (the model), and their
+products are enclosed like every other operation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from h4bench.ident.numerics.interval import up
+from h4bench.ident.numerics.jets import MR, Jet, ein, inverse, jet_ein, jet_inverse
+
+__all__ = ["KrawczykFailure", "nacelle_jets", "point_jets", "pose_box"]
+
+N_JOINTS = 4
+_KRAWCZYK_TRIES = 6
+
+
+class KrawczykFailure(ArithmeticError):
+    """The nacelle pose could not be enclosed over a box of motor angles (too wide a box, or near a singular
+    pose)."""
+
+
+def _cross(a: Jet, b) -> Jet:
+    """Cross product over the last value axis (3) of a jet and a jet or float array."""
+    return Jet.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]])
+
+
+def _const(geometry):
+    """The geometry's derived constants as intervals: L_i e_i, L_i f_i (f = u x e) and u x e itself."""
+    e = MR(geometry.arm_dir)
+    u = MR(geometry.motor_axis)
+    f = MR.stack([u[:, 1] * e[:, 2] - u[:, 2] * e[:, 1], u[:, 2] * e[:, 0] - u[:, 0] * e[:, 2],
+                  u[:, 0] * e[:, 1] - u[:, 1] * e[:, 0]])
+    L = MR(geometry.arm_length[:, None])
+    return L * e, L * f
+
+
+def _loop(geometry, q: Jet, x: Jet):
+    """The loop-closure quantities of eqs. 11-12 as jets: AB, PB, DC (..., 4, 3), Jx (..., 4, 4), Jq (..., 4),
+    u x PB (..., 4, 3) and the closures G (..., 4)."""
+    Le, Lf = _const(geometry)
+    b = geometry.bar_offset
+    th = x[..., 3]
+    c, s = th.cos()[..., None], th.sin()[..., None]  # (..., 1)
+    dc = Jet.stack([c * b[:, 0] - s * b[:, 1], s * b[:, 0] + c * b[:, 1],
+                    Jet.constant(np.broadcast_to(b[:, 2], c.shape[:-1] + (N_JOINTS,)), like=c)])
+    A = dc + x[..., None, :3] + geometry.attach_offset
+    B = q.cos()[..., None] * Le + q.sin()[..., None] * Lf + geometry.motor_pos
+    ab = B - A
+    pb = B - geometry.motor_pos
+    jx = Jet.stack([ab[..., 0], ab[..., 1], ab[..., 2], dc[..., 0] * ab[..., 1] - dc[..., 1] * ab[..., 0]])
+    ucross = _cross_const_left(geometry.motor_axis, pb)  # u x PB
+    jq = jet_ein("...ik,...ik->...i", ucross, ab)  # u . (PB x AB) = (u x PB) . AB
+    l = MR(geometry.forearm_length)
+    G = jet_ein("...ik,...ik->...i", ab, ab) - l * l
+    return ab, pb, dc, jx, jq, ucross, G
+
+
+def _cross_const_left(u: np.ndarray, b: Jet) -> Jet:
+    """u x b for a constant (4, 3) array u and a jet b (..., 4, 3)."""
+    return Jet.stack([b[..., 2] * u[:, 1] - b[..., 1] * u[:, 2], b[..., 0] * u[:, 2] - b[..., 2] * u[:, 0],
+                      b[..., 1] * u[:, 0] - b[..., 0] * u[:, 1]])
+
+
+def pose_box(geometry, Q: MR, x_hat: np.ndarray) -> MR:
+    """An enclosure (S, 4) of the nacelle poses x(q) for every q in the boxes Q (S, 4) [rad], by the parametric
+    Krawczyk test around x_hat (S, 4), the forward kinematics of Q's centres (module docstring).
+
+    Raises :class:`KrawczykFailure` naming the first step whose box could not be verified."""
+    x_hat = np.asarray(x_hat, dtype=float)
+    S = x_hat.shape[0]
+    centre = _loop(geometry, Jet(MR(Q.c)), Jet(MR(x_hat)))
+    jx_c, jq_c = centre[3].v.c, centre[4].v.c
+    C = -0.5 * np.linalg.inv(jx_c)  # ~ G_x^-1 (G_x = -2 Jx)
+    resid = _loop(geometry, Jet(Q), Jet(MR(x_hat)))[6].v  # G(x^, Q)
+    base = MR(x_hat) - ein("...ij,...j->...i", C, resid)
+    # first guess: twice the linearisation's reach plus twice the Newton correction, and a floor
+    J0 = np.linalg.solve(jx_c, np.eye(N_JOINTS)[None] * jq_c[:, None, :])
+    rad = 2.0 * np.einsum("sij,sj->si", np.abs(J0), Q.r) + 2.0 * (np.abs(base.c - x_hat) + base.r) + 1e-12
+    X = MR(x_hat, rad)
+    for _ in range(_KRAWCZYK_TRIES):
+        jx = _loop(geometry, Jet(Q), Jet(X))[3].v
+        M = MR(np.eye(N_JOINTS)) - ein("...ij,...jk->...ik", C, jx * -2.0)
+        K = base + ein("...ij,...j->...i", M, X - x_hat)
+        with np.errstate(all="ignore"):
+            inside = np.all((K.lo > X.lo) & (K.hi < X.hi), axis=1)
+        if inside.all():
+            return K
+        if not (np.all(np.isfinite(K.r)) and np.all(X.r < 1.0)):  # diverging: no verification possible
+            break
+        lo, hi = np.minimum(K.lo, X.lo), np.maximum(K.hi, X.hi)
+        grown = MR.from_bounds(lo, hi)
+        X = MR(x_hat, np.where(inside[:, None], X.r, up(1.5 * np.maximum(np.abs(grown.c - x_hat) + grown.r, X.r))))
+    bad = np.flatnonzero(~inside)
+    raise KrawczykFailure(
+        f"the nacelle pose could not be enclosed over the motor-angle boxes of {bad.size} of {S} steps (first: "
+        f"step {int(bad[0])}, box half-widths {Q.r[bad[0]].tolist()} rad): too wide a box or a pose near a "
+        "singularity")
+
+
+def _x_jet(geometry, Q: MR, X: MR, order: int) -> Jet:
+    """The pose as a jet in z = (q, qd) (8 variables): value X, gradient [J, 0], Hessian [[x_qq, 0], [0, 0]]."""
+    n = 2 * N_JOINTS
+    _, _, _, jx, jq, _, _ = _loop(geometry, Jet(Q), Jet(X))
+    jx_inv = inverse(jx.v)
+    J = jx_inv * jq.v[..., None, :]  # (S, 4, 4)
+    g = MR(np.zeros(X.shape + (n,)))
+    g.c[..., :N_JOINTS], g.r[..., :N_JOINTS] = J.c, J.r
+    if order < 2:
+        return Jet(X, g)
+    # T: the Hessian of G(x(q), q) with x's own Hessian left out; x_qq = (2 Jx)^-1 T = 0.5 Jx^-1 T
+    xj = Jet(X, g, MR(np.zeros(X.shape + (n, n))))
+    qj = Jet.variables(Q, n, 0, 2)
+    T = _loop(geometry, qj, xj)[6].h
+    return Jet(X, g, ein("...ij,...jYZ->...iYZ", jx_inv, T) * 0.5)
+
+
+def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
+    """P and F (each a :class:`Jet` of value shape (S, 4, 2): joint, column Mnac / Ibc) over the boxes Q (S, 4)
+    [rad] of motor angles and V (S, 4) [rad/s] of motor speeds, as functions of the 8 variables (q, qd);
+    x_hat (S, 4) the floating-point forward kinematics of Q's centres. ``order`` 1 (gradients) or 2 (Hessians).
+    """
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order!r}")
+    n = 2 * N_JOINTS
+    X = pose_box(geometry, Q, x_hat)
+    x = _x_jet(geometry, Q, X, order)
+    q = Jet.variables(Q, n, 0, order)
+    qd = Jet.variables(V, n, N_JOINTS, order)
+    ab, pb, dc, jx, jq, ucross, _ = _loop(geometry, q, x)
+    jinv = jet_inverse(jx)
+    J = jinv * jq[..., None, :]
+    xd = jet_ein("...ij,...j->...i", J, qd)
+    bd = ucross * qd[..., None]  # B_i's velocity
+    ezdc = Jet.stack([-dc[..., 1], dc[..., 0], Jet.constant(np.zeros(dc.shape[:-1]), like=dc[..., 0])])
+    dcd = ezdc * xd[..., 3][..., None, None]
+    abd = bd - xd[..., None, :3] - dcd
+    jxd = Jet.stack([abd[..., 0], abd[..., 1], abd[..., 2],
+                     dcd[..., 0] * ab[..., 1] + dc[..., 0] * abd[..., 1] - dcd[..., 1] * ab[..., 0]
+                     - dc[..., 1] * abd[..., 0]])
+    jqd = jet_ein("...ik,ik->...i", _cross(bd, ab) + _cross(pb, abd), geometry.motor_axis)
+    rhs = jqd[..., :, None] * np.eye(N_JOINTS) - jet_ein("...ij,...jk->...ik", jxd, J)
+    jd = jet_ein("...ij,...jk->...ik", jinv, rhs)
+    P = Jet.stack([jet_ein("...ai,...a->...i", J[..., :3, :], xd[..., :3]), J[..., 3, :] * xd[..., 3:4]])
+    F = Jet.stack([-jet_ein("...ai,...a->...i", jd[..., :3, :], xd[..., :3])
+                   - jet_ein("...ai,a->...i", J[..., :3, :], geometry.gravity),
+                   -(jd[..., 3, :] * xd[..., 3:4])])
+    return P, F
+
+
+def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk: int = 2048):
+    """First-order jets of P and F at the points (qm, v) (S, 4) (rigorous values and gradients; x_hat (S, 4) the
+    forward kinematics of qm), computed in chunks of ``chunk`` steps and joined."""
+    parts = [nacelle_jets(geometry, MR(qm[i:i + chunk]), MR(v[i:i + chunk]), x_hat[i:i + chunk], order=1)
+             for i in range(0, qm.shape[0], chunk)]
+
+    def join(items):
+        return MR(np.concatenate([m.c for m in items]), np.concatenate([m.r for m in items]))
+
+    return tuple(Jet(join([p[k].v for p in parts]), join([p[k].g for p in parts])) for k in (0, 1))

@@ -1,0 +1,144 @@
+"""Interval jets against independent oracles: exact rationals (fractions), numpy.linalg.inv, analytic derivatives,
+finite differences of the H4's float kinematics and MuJoCo-free sampling of the boxes."""
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from h4bench import sim
+from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse
+from h4bench.ident.robots.h4_certified import nacelle_terms
+from h4bench.ident.robots.h4_jets import KrawczykFailure, nacelle_jets, point_jets, pose_box
+from h4bench.sim.kinematics import forward_kinematics, inverse_kinematics
+
+
+def _contains_exact(m: MR, exact) -> bool:
+    lo, hi = m.lo.ravel(), m.hi.ravel()
+    return all(Fraction(float(a)) <= x <= Fraction(float(b)) for a, x, b in zip(lo, exact, hi))
+
+
+def test_products_and_sums_enclose_the_exact_rational_results():
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(5, 3)) * 10.0 ** rng.integers(-8, 8, size=(5, 3))
+    b = rng.normal(size=(3, 4))
+    A, B = MR(a), MR(b)
+    prod = ein("ij,jk->ik", A, B)
+    exact = [sum(Fraction(a[i, j]) * Fraction(b[j, k]) for j in range(3)) for i in range(5) for k in range(4)]
+    assert _contains_exact(prod, exact)
+    s = A[:, 0] * A[:, 1] + A[:, 2] - A[:, 0]
+    exact = [Fraction(a[i, 0]) * Fraction(a[i, 1]) + Fraction(a[i, 2]) - Fraction(a[i, 0]) for i in range(5)]
+    assert _contains_exact(s, exact)
+
+
+def test_interval_operations_enclose_every_sampled_operand():
+    rng = np.random.default_rng(2)
+    c, r = rng.normal(size=(2, 50)), rng.uniform(0, 0.1, size=(2, 50))
+    x, y = MR(c[0], r[0]), MR(c[1], r[1])
+    for _ in range(200):
+        u = c[0] + rng.uniform(-1, 1, 50) * r[0]
+        w = c[1] + rng.uniform(-1, 1, 50) * r[1]
+        assert np.all((x * y).contains(u * w)) and np.all((x - y).contains(u - w))
+        assert np.all(x.sin().contains(np.sin(u))) and np.all(x.cos().contains(np.cos(u)))
+
+
+def test_inverse_encloses_every_sampled_matrix_and_refuses_singular_ones():
+    rng = np.random.default_rng(3)
+    M = rng.normal(size=(20, 4, 4)) + 4 * np.eye(4)
+    R = np.full_like(M, 1e-3)
+    inv = inverse(MR(M, R))
+    for _ in range(50):
+        sample = M + rng.uniform(-1, 1, M.shape) * R
+        assert np.all(inv.contains(np.linalg.inv(sample)))
+    Mi = np.abs(np.linalg.inv(M))
+    first_order = Mi @ R @ Mi  # the exact radius to first order in R
+    assert np.all(inv.r <= 3 * first_order)  # informative, not just valid
+    with pytest.raises(SingularIntervalMatrix, match="could not be proven regular"):
+        inverse(MR(np.ones((1, 2, 2)), np.full((1, 2, 2), 0.1)))
+
+
+def test_jets_give_the_analytic_gradient_and_hessian():
+    """f(z) = sin(z0) z1^2 + (M(z)^-1)_00 with M = [[2 + z0, z1], [z1 z0, 3]]: jets at points vs the analytic
+    gradient and a fourth-order finite-difference Hessian; over a box every sampled value is enclosed."""
+    rng = np.random.default_rng(4)
+    z = rng.uniform(-0.5, 0.5, size=(30, 2))
+
+    def f_jet(box, order):
+        zj = Jet.variables(box, 2, 0, order)
+        z0, z1 = zj[..., 0], zj[..., 1]
+        m = Jet.stack([Jet.stack([z0 + 2.0, z1]), Jet.stack([z1 * z0, Jet.constant(np.full(z0.shape, 3.0), z0)])])
+        return z0.sin() * z1 * z1 + jet_inverse(m)[..., 0, 0]
+
+    def f(p):
+        m = np.stack([np.stack([p[..., 0] + 2, p[..., 1]], -1), np.stack([p[..., 1] * p[..., 0],
+                                                                          np.full(p.shape[:-1], 3.0)], -1)], -2)
+        return np.sin(p[..., 0]) * p[..., 1] ** 2 + np.linalg.inv(m)[..., 0, 0]
+
+    jet = f_jet(MR(z), 2)
+    assert np.all(jet.v.contains(f(z)))
+    d = 1e-3
+    for a in range(2):
+        ea = np.eye(2)[a] * d
+        fd = (f(z - 2 * ea) - 8 * f(z - ea) + 8 * f(z + ea) - f(z + 2 * ea)) / (12 * d)
+        np.testing.assert_allclose(jet.g.c[:, a], fd, atol=1e-9)
+        for b in range(2):
+            eb = np.eye(2)[b] * d
+            fd2 = (f(z + ea + eb) - f(z + ea - eb) - f(z - ea + eb) + f(z - ea - eb)) / (4 * d * d)
+            np.testing.assert_allclose(jet.h.c[:, a, b], fd2, atol=1e-5)
+    box = f_jet(MR(z, np.full_like(z, 0.01)), 2)
+    for _ in range(50):
+        zz = z + rng.uniform(-0.01, 0.01, z.shape)
+        assert np.all(box.v.contains(f(zz)))
+        assert np.all(box.g.contains(f_jet(MR(zz), 1).g.c))
+
+
+@pytest.fixture(scope="module")
+def geometry():
+    return sim.H4Geometry.from_model(sim.load_model())
+
+
+def _poses(geometry, n, seed):
+    rng = np.random.default_rng(seed)
+    x = geometry.x_home + rng.uniform(-1, 1, (n, 4)) * np.array([0.04, 0.04, 0.04, 0.2])
+    return inverse_kinematics(geometry, x), rng.uniform(-2, 2, (n, 4))
+
+
+def test_point_jets_match_the_float_kinematics_and_finite_differences(geometry):
+    q, v = _poses(geometry, 40, 5)
+    P, F = point_jets(geometry, q, v, forward_kinematics(geometry, q), chunk=16)
+    P0, F0 = nacelle_terms(geometry, q, v)
+    assert np.all(P.v.contains(P0) | np.isclose(P.v.c, P0, rtol=1e-13, atol=0))
+    np.testing.assert_allclose(P.v.c, P0, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(F.v.c, F0, rtol=1e-12, atol=1e-10)
+    assert np.max(P.g.r) < 1e-8 and np.max(F.g.r) < 1e-6  # point enclosures: rounding-sized
+    for a in range(8):
+        dz = np.eye(8)[a] * (1e-6 if a < 4 else 1e-3)
+        p1, f1 = nacelle_terms(geometry, q + dz[:4], v + dz[4:])
+        p0, f0 = nacelle_terms(geometry, q - dz[:4], v - dz[4:])
+        step = 2 * dz[a]
+        np.testing.assert_allclose(P.g.c[..., a], (p1 - p0) / step, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(F.g.c[..., a], (f1 - f0) / step, rtol=1e-6, atol=1e-4)
+
+
+def test_box_jets_enclose_sampled_values_gradients_and_poses(geometry):
+    q, v = _poses(geometry, 12, 6)
+    rq, rv = 1e-4, 0.05
+    Q, V = MR(q, np.full_like(q, rq)), MR(v, np.full_like(v, rv))
+    x_hat = forward_kinematics(geometry, q)
+    X = pose_box(geometry, Q, x_hat)
+    P, F = nacelle_jets(geometry, Q, V, x_hat, order=2)
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        qq = q + rng.uniform(-rq, rq, q.shape)
+        vv = v + rng.uniform(-rv, rv, v.shape)
+        assert np.all(X.contains(forward_kinematics(geometry, qq, x0=x_hat)))
+        p, f = nacelle_terms(geometry, qq, vv)
+        assert np.all(P.v.contains(p)) and np.all(F.v.contains(f))
+        Pp, Fp = point_jets(geometry, qq, vv, forward_kinematics(geometry, qq, x0=x_hat))
+        assert np.all(P.g.contains(Pp.g.c)) and np.all(F.g.contains(Fp.g.c))
+
+
+def test_pose_box_refuses_a_box_it_cannot_verify(geometry):
+    q, _ = _poses(geometry, 2, 8)
+    with pytest.raises(KrawczykFailure, match="could not be enclosed"):
+        pose_box(geometry, MR(q, np.full_like(q, 0.3)), forward_kinematics(geometry, q))
