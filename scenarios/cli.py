@@ -581,7 +581,7 @@ def _identify_h4_spec(file, spec, bound, method, prior, prior_lower, prior_upper
                         ("--torque-timing", None if torque_timing == "hold" else torque_timing), ("--pairs", pairs)):
         if value is not None:
             raise OptionError(f"{name} does not apply with --spec (the certified box rests on the specification "
-                              f"alone, torques held over each step), got {name} {value}")
+                              f"alone, its torque_timing included), got {name} {value}")
     lo, hi = parse_number(prior_lower, "--prior-lower"), parse_number(prior_upper, "--prior-upper")
     box = load_prior(prior, lo, hi) if prior is not None else (lo, hi)
     return identify_certified_csv(file, spec, box, model=model, out=out)

@@ -123,13 +123,34 @@ def row_windows(n_samples: int, steps: int, stride: int) -> RowWindows:
     return RowWindows(start=np.arange(0, n_samples - steps, stride, dtype=np.int64), steps=int(steps))
 
 
-def torque_rows(tau: np.ndarray, windows: RowWindows, kernel: Kernel):
-    """``y`` (R, n_j) = ``sum_w K_w tau_w`` and its floating-point error bound (R, n_j) [N m]."""
-    K = kernel.integrals
-    taus = windows.gather(np.asarray(tau, dtype=float)[:-1])  # held torque of each step
-    y = np.einsum("w,rwj->rj", K, taus)
-    fp = dot_error(np.einsum("w,rwj->rj", np.abs(K), np.abs(taus)), kernel.steps)
-    return y, fp
+def torque_rows(tau: np.ndarray, windows: RowWindows, kernel: Kernel, timing: str = "hold"):
+    """The torque side ``y`` (R, n_j) [N m] of each row, its floating-point error bound (R, n_j) and an upper bound
+    of ``sum |c|`` of the torque weights (the factor of the torque error bound).
+
+    timing : ``"hold"`` (torque k held over step k: ``y = sum_w K_w tau_w``, exact) or ``"sample"`` (tau_k the
+    torque at instant k: ``y`` is the exact integral of k times the linear interpolation of the samples, weights
+    ``c_u = h (k_u-1 / 6 + k_u / 3) + h (k_u / 3 + k_u+1 / 6)``; the applied torque's deviation from the
+    interpolation of its own samples is at most ``2 rho min(t, h - t)`` on a step for ``|d tau / dt| <= rho``,
+    whose integral against the step's linear k is ``rho h / 2 K_w``: the caller adds ``rho h / 2`` times the
+    returned factor).
+    """
+    tau = np.asarray(tau, dtype=float)
+    if timing == "hold":
+        K = kernel.integrals
+        taus = windows.gather(tau[:-1])  # held torque of each step
+        y = np.einsum("w,rwj->rj", K, taus)
+        return y, dot_error(np.einsum("w,rwj->rj", np.abs(K), np.abs(taus)), kernel.steps), kernel.l1
+    if timing != "sample":
+        raise ValueError(f"timing must be 'hold' or 'sample', got {timing!r}")
+    k, h = kernel.knots, kernel.h
+    c = np.zeros(k.size)
+    c[:-1] += h * (k[:-1] / 3 + k[1:] / 6)
+    c[1:] += h * (k[:-1] / 6 + k[1:] / 3)
+    taus = windows.gather_knots(tau)  # (R, L + 1, n_j)
+    y = np.einsum("u,ruj->rj", c, taus)
+    fp = dot_error(np.einsum("u,ruj->rj", np.abs(c), np.abs(taus)), kernel.steps + 1)
+    # c's own rounding (4 operations per weight) is absorbed by the factor's relative margin
+    return y, fp, float(up(np.sum(np.abs(c)) * (1 + (8 * kernel.steps + 32) * 2.0**-53)))
 
 
 def _secant(q: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:

@@ -132,7 +132,8 @@ def curvature_bounds(geometry, q, h: float, every: int = 10, factor: float = CUR
 def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing | None = None,
                        position_error=None) -> CertifiedEquation:
     """The H4's derived interval equation of a log: q (n, 4) measured positions [rad], tau (n, 4) logged torques
-    [N m] held over each step, spec the error specification (4 joints, ``torque_timing = "hold"``).
+    [N m] (held over each step, or the torque at each sample instant: ``spec.torque_timing``), spec the error
+    specification (4 joints).
 
     position_error : (n, 4) bounds of the position error [rad]; default ``spec.position_error(q)`` (0 gives the
     equation of exact positions, used by the certificate to check the truncation terms alone).
@@ -146,9 +147,6 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
         raise ValueError(f"q and tau must have the same shape (n, {N_JOINTS}), got {q.shape} and {tau.shape}")
     if spec.n_joints != N_JOINTS:
         raise ValueError(f"spec must describe {N_JOINTS} joints (the H4), got n_joints = {spec.n_joints}")
-    if spec.torque_timing != "hold":
-        raise ValueError(f"spec.torque_timing must be 'hold' for the weak form (torques held over each step), got "
-                         f"{spec.torque_timing!r}")
     if spec.latency > 0 and spec.torque_rate is None:
         raise ValueError("spec.latency > 0 needs spec.torque_rate (the bound on |d tau / dt|)")
     h = spec.sample_period
@@ -183,10 +181,11 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     cols["measurement"][..., 4:6] = meas
     cols["truncation"][..., 4:6] = trunc
     cols["second_order"][..., 4:6] = second
-    y, fp = torque_rows(tau, windows, kernel)
-    l1 = kernel.l1
+    y, fp, l1 = torque_rows(tau, windows, kernel, spec.torque_timing)
     model = np.asarray(spec.model_error, dtype=float) * np.ones(N_JOINTS)
-    lat = spec.latency * (np.zeros(N_JOINTS) if spec.torque_rate is None else spec.torque_rate)
+    rate = np.zeros(N_JOINTS) if spec.torque_rate is None else np.asarray(spec.torque_rate, dtype=float)
+    # latency, and for sample-instant torques the applied torque between samples (torque_rows' docstring)
+    lat = rate * (spec.latency + (h / 2 if spec.torque_timing == "sample" else 0.0))
     terms_b = {"torque": np.broadcast_to(spec.torque_error * l1, (R, N_JOINTS)),
                "model": np.broadcast_to((model + lat) * l1, (R, N_JOINTS)), "rounding": fp}
     m = R * N_JOINTS
@@ -199,7 +198,9 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
             "sign_uncertain_steps": int(sign_uncertain.sum()), "steps": int(q.shape[0] - 1),
             "curvature_factor": CURVATURE_FACTOR, "curvature_every": processing.curvature_every,
             "not_proven": ["second_order (Mnac, Ibc): sampled second-derivative bounds x "
-                           f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds"]}
+                           f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds"]
+            + (["torque between samples: within torque_error of the samples' linear interpolation (stated: no "
+                "torque_rate)"] if spec.torque_timing == "sample" and spec.torque_rate is None else [])}
     return CertifiedEquation(Wc=cols["value"].reshape(m, p), D=D, y=y.reshape(m), bound=bound,
                              sample=np.repeat(windows.centre, N_JOINTS), joint=np.tile(joint, R), info=info,
                              names=PARAMETER_NAMES, terms=terms)

@@ -417,17 +417,7 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
         cm = np.abs(vm) > margin
         Fsign_m = windows.gather(np.where(cm, np.sign(vm), 0.0)) @ K1
         r_sign_m = up(windows.gather((~cm).astype(float)) @ K1 + gamma_l)
-    if spec.torque_timing == "sample":  # exact integral of k times the interpolation of the samples
-        c_tau = np.zeros(L + 1)
-        c_tau[:-1] += dt * (k[:-1] / 3 + k[1:] / 6)
-        c_tau[1:] += dt * (k[:-1] / 6 + k[1:] / 3)
-        taus = windows.gather_knots(tau)  # (R, L + 1, n)
-        y = np.einsum("u,ruj->rj", c_tau, taus)
-        y_fp = gamma_l * np.einsum("u,ruj->rj", np.abs(c_tau), np.abs(taus)) + 1e-300
-        k_abs = float(up(np.sum(np.abs(c_tau)) * (1 + gamma_l)))
-    else:
-        y, y_fp = torque_rows(tau, windows, kern)
-        k_abs = kern.l1
+    y, y_fp, k_abs = torque_rows(tau, windows, kern, spec.torque_timing)
     # ---- assemble the standard columns (n rows per window)
     p = robot.n_parameters
     Wc = np.zeros((R_, nj, p))

@@ -139,3 +139,22 @@ def test_run_certified_quick_json(tmp_path):
     assert r["error_model"]["position_resolution"] == [2 * np.pi / 20000] * 4
     assert r["methods"]["certified"]["all_enclosed"] and r["methods"]["hull"]["status"] == "ok"
     assert 0 < r["width_vs_tuned_geomean"] <= 1.5
+
+
+def test_sample_instant_torques_add_the_rate_term_or_state_the_assumption(run_and_spec):
+    """torque_timing = "sample": the rows' torque side integrates the samples' interpolation, the model term
+    grows by torque_rate h / 2 (times the weights' sum, 1), and without a torque_rate the assumption is listed."""
+    run_, spec = run_and_spec
+    es = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
+    q, tau, n = run_.dataset.q, run_.dataset.tau, 800
+    hold = certified_equation(run_.geometry, q[:n], tau[:n], es)
+    rate = np.array([300.0, 200.0, 100.0, 50.0])
+    sampled = certified_equation(run_.geometry, q[:n], tau[:n],
+                                 dataclasses.replace(es, torque_timing="sample", torque_rate=rate))
+    h = es.sample_period
+    np.testing.assert_allclose(sampled.terms["model"] - hold.terms["model"], np.tile(rate * h / 2, hold.y.size // 4),
+                               rtol=1e-9)
+    assert not np.allclose(sampled.y, hold.y)
+    assert not any("torque between samples" in s for s in sampled.info["not_proven"])
+    stated = certified_equation(run_.geometry, q[:n], tau[:n], dataclasses.replace(es, torque_timing="sample"))
+    assert any("torque between samples" in s for s in stated.info["not_proven"])
