@@ -206,7 +206,7 @@ def coulomb_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max):
 
 
 def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_max, qdd_max, curvature,
-                      chunk: int = 512):
+                      encoder=None, chunk: int = 512):
     """Columns ``dP/dt + F`` with configuration-dependent ``P(q, qd)``, ``F(q, qd)`` (n_out outputs, nc columns).
 
     evaluate : ``f(q_m (S, n_j), v (S, n_j)) -> (P, F)``, each a first-order :class:`~ident.numerics.jets.Jet`
@@ -214,13 +214,19 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     gradients at the measured secant states (e.g. :func:`ident.robots.h4_jets.nacelle_jets`).
     q, e : (n, n_j) measured positions and their error bounds [rad]; qd_max, qdd_max (n_j,) stated motion bounds;
     curvature : (MP, MF), each (n_out, nc, 2 n_j, 2 n_j) or per step (S, n_out, nc, 2 n_j, 2 n_j), bounds of ``|d^2 P / dx_a dx_b|``, ``|d^2 F / ...|`` over
-    ``x = (q, qd)`` near the motion (see :func:`ident.robots.h4_certified.curvature_bounds`: sampled, NOT proven).
+    ``x = (q, qd)`` over each step's motion (see :func:`ident.robots.h4_certified.curvature_bounds`: sampled, NOT
+    proven): used by the truncation's second-order remainder.
+    encoder : (MP, MF, GP, GF) per step, or None (then ``curvature`` serves here too): bounds over each step's
+    ENCODER box (the measured secant state +- the position error's effect ``(e_m, e_v)``) of the second
+    derivatives (S, n_out, nc, 2 n_j, 2 n_j) and of the gradients (S, n_out, nc, 2 n_j) of P and F, e.g. the
+    magnitudes of interval jets over those boxes (:func:`ident.robots.h4_jets.box_jets`): used by the encoder's
+    second-order term and to carry the gradients from the measured to the true secant state.
 
     Returns (value, meas, trunc, second), each (R, n_out, nc): the centre; the first-order encoder radius
     ``sum_u |dPhi / dq_u| e_u`` (the gradient of the row functional, enclosed) plus the enclosures' own radii; the
     truncation radius (chord remainder, linear terms exactly integrated, second-order remainder over the step's
-    motion box); the encoder's second-order term. ``second`` and the second-order part of ``trunc`` rest on
-    ``curvature``.
+    motion box); the encoder's second-order term. The second-order part of ``trunc`` rests on ``curvature``;
+    ``second`` and the gradients' transfer to the true state rest on ``encoder``.
     """
     h = kernel.h
     qm, v = _secant(q, h)
@@ -231,6 +237,7 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     Pq, Pv, Fq, Fv = Pj.g.c[..., :nj], Pj.g.c[..., nj:], Fj.g.c[..., :nj], Fj.g.c[..., nj:]
     Pq_r, Pv_r, Fq_r, Fv_r = Pj.g.r[..., :nj], Pj.g.r[..., nj:], Fj.g.r[..., :nj], Fj.g.r[..., nj:]
     MP, MF = (np.broadcast_to(np.asarray(m, dtype=float), (S, n_out, nc, 2 * nj, 2 * nj)) for m in curvature)
+    MPe, MFe, GPe, GFe = (MP, MF, None, None) if encoder is None else encoder
     qdd_max = np.asarray(qdd_max, dtype=float)
     # gradients at the measured secant state, widened to cover the true one (|q_m error| <= e_m, |v error| <= e_v)
     em, ev = 0.5 * (e[:-1] + e[1:]), (e[:-1] + e[1:]) / h
@@ -247,19 +254,23 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     QP = 0.5 * np.einsum("sicab,sa,sb->sic", MP, d_int, d_int)  # (S, n_out, nc)
     QF = 0.5 * np.einsum("sicab,sa,sb->sic", MF, d_int, d_int)
     QF_sup = 0.5 * np.einsum("sicab,sa,sb->sic", MF, d_sup, d_sup)
-    gP = np.einsum("sicab,sb->sica", MP, eps)  # (S, n_out, nc, 2 n_j)
-    gF = np.einsum("sicab,sb->sica", MF, eps)
+    # the gradients at the TRUE secant state: the measured one's plus the encoder box's second derivatives times
+    # eps, or the gradient's bound over the encoder box, whichever is smaller (both hold)
+    gP = np.einsum("sicab,sb->sica", MPe, eps)  # (S, n_out, nc, 2 n_j)
+    gF = np.einsum("sicab,sb->sica", MFe, eps)
     aPq = np.abs(Pq) + Pq_r + gP[..., :nj]
     aFq = np.abs(Fq) + Fq_r + gF[..., :nj]
     aFv = np.abs(Fv) + Fv_r + gF[..., nj:]
+    if GPe is not None:
+        aPq, aFq, aFv = np.minimum(aPq, GPe[..., :nj]), np.minimum(aFq, GFe[..., :nj]), np.minimum(aFv, GFe[..., nj:])
     # per-step truncation pieces (S, n_out, nc): coefficient of |s_w| and of |k_mid,w|
     t_s = (np.einsum("sica,a->sic", aPq, qdd_max) * h**3 / 12 + h * QP
            + np.einsum("sica,sa->sic", aFq, qd_step) * h**3 / 12 + np.einsum("sica,a->sic", aFq, qdd_max) * h**4 / 32
            + np.einsum("sica,a->sic", aFv, qdd_max) * h**3 / 8 + QF_sup * h**2 / 4)
     t_k = np.einsum("sica,a->sic", aFq, qdd_max) * h**3 / 12 + h * QF
     # encoder second-order: 1/2 eps^T M eps per step
-    s2P = 0.5 * np.einsum("sicab,sa,sb->sic", MP, eps, eps)
-    s2F = 0.5 * np.einsum("sicab,sa,sb->sic", MF, eps, eps)
+    s2P = 0.5 * np.einsum("sicab,sa,sb->sic", MPe, eps, eps)
+    s2F = 0.5 * np.einsum("sicab,sa,sb->sic", MFe, eps, eps)
     s, K, km = kernel.slopes, kernel.integrals, kernel.mids
     # derivative of step j's term with respect to q_j (A) and q_j+1 (B), per unit weight
     dPa, dPb = 0.5 * Pq - Pv / h, 0.5 * Pq + Pv / h
@@ -302,4 +313,6 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
                                 + np.einsum("w,rwic->ric", np.abs(km), sub.gather(t_k)))
         second[r0:r0 + chunk] = (h * np.einsum("w,rwic->ric", np.abs(s), sub.gather(s2P))
                                  + np.einsum("w,rwic->ric", np.abs(K), sub.gather(s2F)))
-    return value, meas, up(trunc), up(second)
+    # the float sums above add at most (4 L + 256) u relative error (nonnegative terms)
+    grow = 1.0 + (4 * L + 256) * 2.0**-53
+    return value, meas, up(trunc * grow), up(second * grow)

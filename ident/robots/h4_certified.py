@@ -12,15 +12,16 @@ The weak form of :mod:`ident.processing.weakform` applied to the H4 model of :mo
 
 What is proven and what is not (``CertifiedEquation.info["not_proven"]``): the torque side, the Imot, Fv and Fs
 columns and the first-order terms of Mnac and Ibc are bounded from the ErrorSpec alone; the values and gradients of
-P and F at the measured secant states are rigorous enclosures (interval jets through a Krawczyk-verified nacelle
-pose, :mod:`ident.robots.h4_jets`). The second-order remainders of the Mnac and Ibc columns (the variation of
-J(q), Jd(q, qd) within one sample step, and the encoder's second-order effect) rest on bounds of the second
-derivatives of P and F that are SAMPLED (central differences at a subsample of the measured steps, maximum times
-:data:`CURVATURE_FACTOR`), not proven: the interval jets of :mod:`ident.robots.h4_jets` do enclose them over each
-step's box, but plain interval evaluation is far too wide at the boxes a step spans (on ``certified --quick``
-up to 7.5e-3 rad (median 1.4e-3) and 0.8 rad/s: the Krawczyk pose test fails on about half of the steps and the
-rest overestimate the sampled bounds 10^4 to 10^12 times). Their share of the radius is reported (``terms``), so
-that what rests on them is visible.
+P and F at the measured secant states, and their gradients and second derivatives over each step's ENCODER box
+(the encoder's second-order term, and the transfer of the gradients to the true secant state), are rigorous
+enclosures (interval jets through a Krawczyk-verified nacelle pose, :mod:`ident.robots.h4_jets`; a step whose box
+cannot be verified keeps the sampled bound and is listed). The truncation's second-order remainder over each
+step's MOTION (the variation of J(q), Jd(q, qd) while the robot moves within one sample step) rests on bounds of
+the second derivatives that are SAMPLED (central differences at a subsample of the measured steps, maximum times
+:data:`CURVATURE_FACTOR`), not proven: plain interval jets over a step's motion box are far too wide (on
+``certified --quick`` it spans up to 7.5e-3 rad (median 1.4e-3) and 0.8 rad/s; the pose test fails on about half
+of the steps and the rest overestimate the sampled bounds 10^4 to 10^12 times). Its share of the radius is
+reported (``terms``), so that what rests on it is visible.
 """
 
 from __future__ import annotations
@@ -34,7 +35,9 @@ from h4bench.ident.processing.weakform import (coulomb_columns, imot_columns, ma
                                                row_windows, torque_rows, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
-from h4bench.ident.robots.h4_jets import point_jets
+from h4bench.ident.numerics.interval import up
+from h4bench.ident.numerics.jets import MR
+from h4bench.ident.robots.h4_jets import box_jets, point_jets
 
 __all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "Processing", "certified_equation", "curvature_bounds",
            "nacelle_terms"]
@@ -176,7 +179,17 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     def evaluate(a, b):  # rigorous values and gradients at the measured secant states
         return point_jets(geometry, a, b, pose)
 
-    value, meas, trunc, second = nonlinear_columns(evaluate, q, e, windows, kernel, spec.qd_max, spec.qdd_max, curv)
+    # the encoder boxes (measured secant state +- the position error's effect) and the jets over them; a step
+    # whose box cannot be verified keeps the sampled bounds (listed in not_proven)
+    em, ev = up(0.5 * (e[:-1] + e[1:])), up((e[:-1] + e[1:]) / h)
+    vm = np.diff(q, axis=0) / h
+    GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, up(em + 2 * 2.0**-53 * np.abs(qm))), MR(vm, up(ev + 4 * 2.0**-53 * np.abs(vm))), pose)
+    for got, sampled in ((HP, curv[0]), (HF, curv[1])):
+        got[~proven] = sampled[~proven]
+    for got in (GP, GF):
+        got[~proven] = np.inf
+    value, meas, trunc, second = nonlinear_columns(evaluate, q, e, windows, kernel, spec.qd_max, spec.qdd_max, curv,
+                                                   encoder=(HP, HF, GP, GF))
     cols["value"][..., 4:6] = value
     cols["measurement"][..., 4:6] = meas
     cols["truncation"][..., 4:6] = trunc
@@ -197,8 +210,11 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
             "stride": processing.stride, "kernel_l1": l1, "rows": m, "windows": R,
             "sign_uncertain_steps": int(sign_uncertain.sum()), "steps": int(q.shape[0] - 1),
             "curvature_factor": CURVATURE_FACTOR, "curvature_every": processing.curvature_every,
-            "not_proven": ["second_order (Mnac, Ibc): sampled second-derivative bounds x "
-                           f"{CURVATURE_FACTOR:g}", "truncation (Mnac, Ibc): its second-order part, same bounds"]
+            "encoder_boxes_proven": int(proven.sum()),
+            "not_proven": ["truncation (Mnac, Ibc): its second-order part over each step's motion, from sampled "
+                           f"second-derivative bounds x {CURVATURE_FACTOR:g}"]
+            + ([f"second_order (Mnac, Ibc) on {int((~proven).sum())} of {proven.size} steps whose encoder box could "
+                f"not be verified: sampled second-derivative bounds x {CURVATURE_FACTOR:g}"] if not proven.all() else [])
             + (["torque between samples: within torque_error of the samples' linear interpolation (stated: no "
                 "torque_rate)"] if spec.torque_timing == "sample" and spec.torque_rate is None else [])}
     return CertifiedEquation(Wc=cols["value"].reshape(m, p), D=D, y=y.reshape(m), bound=bound,

@@ -27,9 +27,9 @@ from __future__ import annotations
 import numpy as np
 
 from h4bench.ident.numerics.interval import up
-from h4bench.ident.numerics.jets import MR, Jet, ein, inverse, jet_ein, jet_inverse
+from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse
 
-__all__ = ["KrawczykFailure", "nacelle_jets", "point_jets", "pose_box"]
+__all__ = ["KrawczykFailure", "box_jets", "nacelle_jets", "point_jets", "pose_box"]
 
 N_JOINTS = 4
 _KRAWCZYK_TRIES = 6
@@ -179,3 +179,28 @@ def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk
         return MR(np.concatenate([m.c for m in items]), np.concatenate([m.r for m in items]))
 
     return tuple(Jet(join([p[k].v for p in parts]), join([p[k].g for p in parts])) for k in (0, 1))
+
+
+def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int = 256):
+    """Bounds over the boxes Q, V (S, 4) of |gradient| and |Hessian| of P and F (second-order jets, chunked).
+
+    Returns (GP, HP, GF, HF, proven): GP, GF (S, 4, 2, 8) and HP, HF (S, 4, 2, 8, 8) magnitudes, and a (S,) bool
+    mask of the steps whose boxes were verified; the bounds of the others are NaN (the caller must not use them:
+    a pose test or an interval inverse failed there, e.g. near a singular pose or for too wide a box)."""
+    S = Q.shape[0]
+    GP, GF = np.full((S, 4, 2, 8), np.nan), np.full((S, 4, 2, 8), np.nan)
+    HP, HF = np.full((S, 4, 2, 8, 8), np.nan), np.full((S, 4, 2, 8, 8), np.nan)
+    proven = np.zeros(S, dtype=bool)
+    todo = [(i, min(i + chunk, S)) for i in range(0, S, chunk)]
+    while todo:
+        a, b = todo.pop()
+        try:
+            P, F = nacelle_jets(geometry, Q[a:b], V[a:b], x_hat[a:b], order=2)
+        except (KrawczykFailure, SingularIntervalMatrix):
+            if b - a > 1:  # find the steps that fail by bisection
+                m = (a + b) // 2
+                todo += [(a, m), (m, b)]
+            continue
+        GP[a:b], HP[a:b], GF[a:b], HF[a:b] = P.g.mag(), P.h.mag(), F.g.mag(), F.h.mag()
+        proven[a:b] = True
+    return GP, HP, GF, HF, proven

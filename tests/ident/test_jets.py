@@ -9,7 +9,7 @@ import pytest
 from h4bench import sim
 from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse
 from h4bench.ident.robots.h4_certified import nacelle_terms
-from h4bench.ident.robots.h4_jets import KrawczykFailure, nacelle_jets, point_jets, pose_box
+from h4bench.ident.robots.h4_jets import KrawczykFailure, box_jets, nacelle_jets, point_jets, pose_box
 from h4bench.sim.kinematics import forward_kinematics, inverse_kinematics
 
 
@@ -142,3 +142,31 @@ def test_pose_box_refuses_a_box_it_cannot_verify(geometry):
     q, _ = _poses(geometry, 2, 8)
     with pytest.raises(KrawczykFailure, match="could not be enclosed"):
         pose_box(geometry, MR(q, np.full_like(q, 0.3)), forward_kinematics(geometry, q))
+
+
+def test_box_hessians_bound_the_hessians_inside_and_failures_are_marked(geometry):
+    """box_jets: |Hessian| bounds hold at points inside the box (central differences of the enclosed point
+    gradients); a box that cannot be verified is marked, not guessed."""
+    q, v = _poses(geometry, 6, 9)
+    rq, rv = np.full_like(q, 1.6e-4), np.full_like(v, 0.3)
+    rq[3] = 0.3  # far too wide: the pose test must fail on this step alone
+    x_hat = forward_kinematics(geometry, q)
+    GP, HP, GF, HF, proven = box_jets(geometry, MR(q, rq), MR(v, rv), x_hat, chunk=4)
+    assert proven.tolist() == [True, True, True, False, True, True]
+    assert np.all(np.isnan(HP[3])) and np.all(np.isfinite(HP[proven]))
+    ok = np.flatnonzero(proven)
+    rng = np.random.default_rng(10)
+    d = np.array([1e-6] * 4 + [1e-4] * 4)
+    for _ in range(5):
+        zq = q[ok] + rng.uniform(-0.5, 0.5, (ok.size, 4)) * rq[ok]
+        zv = v[ok] + rng.uniform(-0.5, 0.5, (ok.size, 4)) * rv[ok]
+        P0, F0 = point_jets(geometry, zq, zv, forward_kinematics(geometry, zq, x0=x_hat[ok]))
+        assert np.all(np.abs(P0.g.c) <= GP[ok]) and np.all(np.abs(F0.g.c) <= GF[ok])
+        for a in range(8):
+            dz = np.eye(8)[a] * d[a]
+            Pp, Fp = point_jets(geometry, zq + dz[:4], zv + dz[4:], forward_kinematics(geometry, zq + dz[:4]))
+            Pm, Fm = point_jets(geometry, zq - dz[:4], zv - dz[4:], forward_kinematics(geometry, zq - dz[:4]))
+            hp = (Pp.g.c - Pm.g.c) / (2 * d[a])
+            hf = (Fp.g.c - Fm.g.c) / (2 * d[a])
+            assert np.all(np.abs(hp) <= HP[ok][..., a, :] * (1 + 1e-6) + 1e-6)
+            assert np.all(np.abs(hf) <= HF[ok][..., a, :] * (1 + 1e-6) + 1e-4)
