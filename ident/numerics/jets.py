@@ -140,9 +140,11 @@ def ein(spec: str, a, b) -> MR:
     a, b = _mr(a), _mr(b)
     n = _terms(spec, a.shape, b.shape)
     c = np.einsum(spec, a.c, b.c)
-    aa, ab = np.abs(a.c), np.abs(b.c)
-    r = np.einsum(spec, aa, b.r) + np.einsum(spec, a.r, ab + b.r)
-    r = r + _gamma(n) * np.einsum(spec, aa, ab)
+    ab = np.abs(b.c)
+    # |a.c| (b.r + gamma |b.c|) + a.r (|b.c| + b.r): the operands' radii and the midpoint's rounding
+    r = np.einsum(spec, np.abs(a.c), b.r + _gamma(n) * ab)
+    if np.any(a.r):
+        r = r + np.einsum(spec, a.r, ab + b.r)
     return MR(c, r * (1.0 + 3 * _gamma(n)) + _TINY)
 
 
@@ -207,6 +209,19 @@ class Jet:
         g = MR(np.zeros(v.shape + (n,)))
         h = MR(np.zeros(v.shape + (n, n))) if like.order == 2 else None
         return cls(v, g, h)
+
+    def pad(self, n: int) -> Jet:
+        """The same jet in n >= m variables: the first m are this jet's, the others absent (zero derivatives)."""
+        if self.g is None:
+            return self
+        m = self.g.shape[-1]
+        g = MR(np.zeros(self.v.shape + (n,)))
+        g.c[..., :m], g.r[..., :m] = self.g.c, self.g.r
+        if self.h is None:
+            return Jet(self.v, g)
+        h = MR(np.zeros(self.v.shape + (n, n)))
+        h.c[..., :m, :m], h.r[..., :m, :m] = self.h.c, self.h.r
+        return Jet(self.v, g, h)
 
     def __getitem__(self, key) -> Jet:
         key = key if isinstance(key, tuple) else (key,)

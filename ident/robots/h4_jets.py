@@ -120,8 +120,8 @@ def pose_box(geometry, Q: MR, x_hat: np.ndarray) -> MR:
 
 
 def _x_jet(geometry, Q: MR, X: MR, order: int) -> Jet:
-    """The pose as a jet in z = (q, qd) (8 variables): value X, gradient [J, 0], Hessian [[x_qq, 0], [0, 0]]."""
-    n = 2 * N_JOINTS
+    """The pose as a jet in q (4 variables): value X, gradient J, Hessian x_qq."""
+    n = N_JOINTS
     _, _, _, jx, jq, _, _ = _loop(geometry, Jet(Q), Jet(X))
     jx_inv = inverse(jx.v)
     J = jx_inv * jq.v[..., None, :]  # (S, 4, 4)
@@ -145,12 +145,14 @@ def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
         raise ValueError(f"order must be 1 or 2, got {order!r}")
     n = 2 * N_JOINTS
     X = pose_box(geometry, Q, x_hat)
+    # everything that depends on q alone in the 4 variables q (a quarter of the Hessian entries), then padded
     x = _x_jet(geometry, Q, X, order)
-    q = Jet.variables(Q, n, 0, order)
-    qd = Jet.variables(V, n, N_JOINTS, order)
+    q = Jet.variables(Q, N_JOINTS, 0, order)
     ab, pb, dc, jx, jq, ucross, _ = _loop(geometry, q, x)
     jinv = jet_inverse(jx)
     J = jinv * jq[..., None, :]
+    ab, pb, dc, ucross, jinv, J = (j.pad(n) for j in (ab, pb, dc, ucross, jinv, J))
+    qd = Jet.variables(V, n, N_JOINTS, order)
     xd = jet_ein("...ij,...j->...i", J, qd)
     bd = ucross * qd[..., None]  # B_i's velocity
     ezdc = Jet.stack([-dc[..., 1], dc[..., 0], Jet.constant(np.zeros(dc.shape[:-1]), like=dc[..., 0])])
@@ -181,7 +183,7 @@ def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk
     return tuple(Jet(join([p[k].v for p in parts]), join([p[k].g for p in parts])) for k in (0, 1))
 
 
-def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int = 256):
+def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int = 128):
     """Bounds over the boxes Q, V (S, 4) of |gradient| and |Hessian| of P and F (second-order jets, chunked).
 
     Returns (GP, HP, GF, HF, proven): GP, GF (S, 4, 2, 8) and HP, HF (S, 4, 2, 8, 8) magnitudes, and a (S,) bool
