@@ -42,13 +42,19 @@ def _gamma(n: int) -> float:
 
 
 class MR:
-    """An interval array in midpoint-radius form: ``c`` and ``r >= 0`` of one shape."""
+    """An interval array in midpoint-radius form, ``c +- r`` (``r >= 0``), optionally with a linear part in one
+    shared symbol ``tau`` in [-1, 1]: ``c + a tau +- r`` (a first-order Taylor model: for every value of tau the
+    quantity lies in ``[c + a tau - r, c + a tau + r]``). ``a`` is None for a plain interval. Operations on Taylor
+    models keep the part linear in tau and bound the rest (``tau^2 = 1/2 + (tau^2 - 1/2)``, the second term in
+    [-1/2, 1/2]; ``sin``/``cos`` by their second-order Taylor remainder), so a quantity that varies along tau
+    (e.g. along one sample step's motion) is not widened by the dependency along it."""
 
-    __slots__ = ("c", "r")
+    __slots__ = ("c", "a", "r")
 
-    def __init__(self, c, r=None):
+    def __init__(self, c, r=None, a=None):
         self.c = np.asarray(c, dtype=float)
         self.r = np.zeros_like(self.c) if r is None else np.asarray(r, dtype=float)
+        self.a = None if a is None else np.asarray(a, dtype=float)
 
     @classmethod
     def from_bounds(cls, lo, hi) -> MR:
@@ -58,34 +64,60 @@ class MR:
 
     @staticmethod
     def stack(parts: list, axis: int = -1) -> MR:
-        return MR(np.stack([p.c for p in parts], axis=axis), np.stack([p.r for p in parts], axis=axis))
+        a = None
+        if any(p.a is not None for p in parts):
+            a = np.stack([np.zeros_like(p.c) if p.a is None else p.a for p in parts], axis=axis)
+        return MR(np.stack([p.c for p in parts], axis=axis), np.stack([p.r for p in parts], axis=axis), a)
+
+    @classmethod
+    def zeros(cls, shape, like: MR | None = None) -> MR:
+        """Exact zeros of ``shape``, a Taylor model if ``like`` is one."""
+        return cls(np.zeros(shape), None, None if like is None or like.a is None else np.zeros(shape))
+
+    def set(self, key, other: MR) -> None:
+        """``self[key] = other`` in place (self must be a Taylor model if other is one)."""
+        self.c[key], self.r[key] = other.c, other.r
+        if other.a is not None:
+            self.a[key] = other.a
 
     @property
     def shape(self) -> tuple:
         return self.c.shape
 
+    def _spread(self) -> np.ndarray:
+        """An upper bound of the distance from c to any value (``|a| + r``, before rounding)."""
+        return self.r if self.a is None else np.abs(self.a) + self.r
+
     @property
     def lo(self) -> np.ndarray:
-        return self.c - up(self.r + U * np.abs(self.c) * 2 + _TINY)
+        return self.c - up(self._spread() * _ONE + U * np.abs(self.c) * 2 + _TINY)
 
     @property
     def hi(self) -> np.ndarray:
-        return self.c + up(self.r + U * np.abs(self.c) * 2 + _TINY)
+        return self.c + up(self._spread() * _ONE + U * np.abs(self.c) * 2 + _TINY)
 
     def mag(self) -> np.ndarray:
-        """An upper bound of ``|x|`` over the interval."""
-        return up(up(np.abs(self.c) + self.r) * _ONE)
+        """An upper bound of ``|x|`` over the interval (over every tau for a Taylor model)."""
+        return up(up(np.abs(self.c) + self._spread()) * _ONE)
 
     def __getitem__(self, key) -> MR:
-        return MR(self.c[key], self.r[key])
+        return MR(self.c[key], self.r[key], None if self.a is None else self.a[key])
+
+    def swap(self) -> MR:
+        """The transpose of the last two axes."""
+        return MR(np.swapaxes(self.c, -1, -2), np.swapaxes(self.r, -1, -2),
+                  None if self.a is None else np.swapaxes(self.a, -1, -2))
 
     def __neg__(self) -> MR:
-        return MR(-self.c, self.r)
+        return MR(-self.c, self.r, None if self.a is None else -self.a)
 
     def __add__(self, other) -> MR:
         o = _mr(other)
         c = self.c + o.c
-        return MR(c, (self.r + o.r + U * np.abs(c)) * _ONE + _TINY)
+        if self.a is None and o.a is None:
+            return MR(c, (self.r + o.r + U * np.abs(c)) * _ONE + _TINY)
+        a = _plus(self.a, o.a)
+        return MR(c, (self.r + o.r + U * (np.abs(c) + np.abs(a))) * _ONE + _TINY, a)
 
     __radd__ = __add__
 
@@ -97,22 +129,47 @@ class MR:
 
     def __mul__(self, other) -> MR:
         o = _mr(other)
-        c = self.c * o.c
-        r = np.abs(self.c) * o.r + self.r * (np.abs(o.c) + o.r) + U * np.abs(c)
-        return MR(c, r * _ONE + _TINY)
+        if self.a is None and o.a is None:
+            c = self.c * o.c
+            r = np.abs(self.c) * o.r + self.r * (np.abs(o.c) + o.r) + U * np.abs(c)
+            return MR(c, r * _ONE + _TINY)
+        a1 = np.zeros_like(self.c) if self.a is None else self.a
+        a2 = np.zeros_like(o.c) if o.a is None else o.a
+        aa = a1 * a2  # the tau^2 part: 1/2 into c, +-1/2 into r
+        c = self.c * o.c + 0.5 * aa
+        a = self.c * a2 + a1 * o.c
+        m1, m2 = np.abs(self.c) + np.abs(a1), np.abs(o.c) + np.abs(a2)
+        r = m1 * o.r + self.r * (m2 + o.r) + 0.5 * np.abs(aa) + 4 * U * m1 * m2
+        return MR(c, r * _ONE + _TINY, a)
 
     __rmul__ = __mul__
 
+    def _trig(self, f, df, sign) -> MR:
+        c = f(self.c)
+        err = 2 * LIBM_ULPS * U * np.abs(c)
+        if self.a is None:  # Lipschitz 1
+            return MR(c, (self.r + err) * _ONE + _TINY)
+        d = df(self.c) * sign
+        a = d * self.a
+        # f(c + delta) = f(c) + f'(c) delta + R, |R| <= delta^2 / 2 with |delta| <= |a| + r
+        spread = np.abs(self.a) + self.r
+        r = np.abs(d) * self.r + 0.5 * spread * spread + err + 2 * LIBM_ULPS * U * np.abs(a) + U * np.abs(a)
+        return MR(c, r * _ONE + _TINY, a)
+
     def sin(self) -> MR:
-        c = np.sin(self.c)
-        return MR(c, (self.r + 2 * LIBM_ULPS * U * np.abs(c)) * _ONE + _TINY)
+        return self._trig(np.sin, np.cos, 1.0)
 
     def cos(self) -> MR:
-        c = np.cos(self.c)
-        return MR(c, (self.r + 2 * LIBM_ULPS * U * np.abs(c)) * _ONE + _TINY)
+        return self._trig(np.cos, np.sin, -1.0)
 
     def contains(self, x) -> np.ndarray:
         return (self.lo <= x) & (x <= self.hi)
+
+
+def _plus(a, b):
+    if a is None:
+        return b
+    return a if b is None else a + b
 
 
 def _mr(x) -> MR:
@@ -136,16 +193,27 @@ def _terms(spec: str, a_shape: tuple, b_shape: tuple) -> int:
 
 
 def ein(spec: str, a, b) -> MR:
-    """``einsum(spec, a, b)`` of two interval (or float) arrays, enclosed (any summation order)."""
+    """``einsum(spec, a, b)`` of two interval (or float) arrays or Taylor models, enclosed (any summation order)."""
     a, b = _mr(a), _mr(b)
     n = _terms(spec, a.shape, b.shape)
-    c = np.einsum(spec, a.c, b.c)
-    ab = np.abs(b.c)
-    # |a.c| (b.r + gamma |b.c|) + a.r (|b.c| + b.r): the operands' radii and the midpoint's rounding
-    r = np.einsum(spec, np.abs(a.c), b.r + _gamma(n) * ab)
-    if np.any(a.r):
-        r = r + np.einsum(spec, a.r, ab + b.r)
-    return MR(c, r * (1.0 + 3 * _gamma(n)) + _TINY)
+    g = _gamma(n)
+    if a.a is None and b.a is None:
+        c = np.einsum(spec, a.c, b.c)
+        ab = np.abs(b.c)
+        # |a.c| (b.r + gamma |b.c|) + a.r (|b.c| + b.r): the operands' radii and the midpoint's rounding
+        r = np.einsum(spec, np.abs(a.c), b.r + g * ab)
+        if np.any(a.r):
+            r = r + np.einsum(spec, a.r, ab + b.r)
+        return MR(c, r * (1.0 + 3 * g) + _TINY)
+    a1 = np.zeros_like(a.c) if a.a is None else a.a
+    a2 = np.zeros_like(b.c) if b.a is None else b.a
+    aa = np.einsum(spec, a1, a2)
+    c = np.einsum(spec, a.c, b.c) + 0.5 * aa
+    lin = np.einsum(spec, a.c, a2) + np.einsum(spec, a1, b.c)
+    m1, m2 = np.abs(a.c) + np.abs(a1), np.abs(b.c) + np.abs(a2)
+    r = (np.einsum(spec, m1, b.r + 2 * g * m2) + np.einsum(spec, a.r, m2 + b.r)
+         + 0.5 * np.einsum(spec, np.abs(a1), np.abs(a2)))
+    return MR(c, r * (1.0 + 4 * g) + _TINY, lin)
 
 
 def inverse(m: MR) -> MR:
@@ -167,7 +235,7 @@ def inverse(m: MR) -> MR:
             f"||I - C M|| = {float(np.max(beta)):.3g} >= 0.75): the box is too wide or near a singular pose")
     rho = up(up(beta * beta) / (1.0 - beta) * _ONE)  # 1 - beta: one rounding, covered by _ONE
     ic = eye + E.c
-    inner = MR(ic, (E.r + U * np.abs(ic) + rho[..., None, None]) * _ONE + _TINY)
+    inner = MR(ic, (E.r + U * np.abs(ic) + rho[..., None, None]) * _ONE + _TINY, E.a)
     return ein("...ij,...jk->...ik", inner, C)
 
 
@@ -215,12 +283,12 @@ class Jet:
         if self.g is None:
             return self
         m = self.g.shape[-1]
-        g = MR(np.zeros(self.v.shape + (n,)))
-        g.c[..., :m], g.r[..., :m] = self.g.c, self.g.r
+        g = MR.zeros(self.v.shape + (n,), like=self.g)
+        g.set((Ellipsis, slice(0, m)), self.g)
         if self.h is None:
             return Jet(self.v, g)
-        h = MR(np.zeros(self.v.shape + (n, n)))
-        h.c[..., :m, :m], h.r[..., :m, :m] = self.h.c, self.h.r
+        h = MR.zeros(self.v.shape + (n, n), like=self.h)
+        h.set((Ellipsis, slice(0, m), slice(0, m)), self.h)
         return Jet(self.v, g, h)
 
     def __getitem__(self, key) -> Jet:
@@ -290,17 +358,13 @@ class Jet:
         """Stack jets of one order along a new LAST value axis (``axis`` must be -1)."""
         if axis != -1:
             raise ValueError(f"axis must be -1 (a new last value axis), got {axis}")
-
-        def st(parts, ax):
-            return MR(np.stack([p.c for p in parts], axis=ax), np.stack([p.r for p in parts], axis=ax))
-
         order = jets[0].order
-        return Jet(st([j.v for j in jets], -1), st([j.g for j in jets], -2) if order >= 1 else None,
-                   st([j.h for j in jets], -3) if order == 2 else None)
+        return Jet(MR.stack([j.v for j in jets], -1), MR.stack([j.g for j in jets], -2) if order >= 1 else None,
+                   MR.stack([j.h for j in jets], -3) if order == 2 else None)
 
 
 def _transpose(m: MR) -> MR:
-    return MR(np.swapaxes(m.c, -1, -2), np.swapaxes(m.r, -1, -2))
+    return m.swap()
 
 
 def jet_ein(spec: str, a, b) -> Jet:

@@ -244,15 +244,30 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     eps = np.concatenate([em, ev], axis=1)  # (S, 2 n_j)
     # the true speed on each step: |qd| <= |v_measured| + e_v + qdd_max h / 2, and never above the stated qd_max
     qd_step = np.minimum(np.abs(v) + ev + qdd_max * h / 2, np.asarray(qd_max, dtype=float))  # (S, n_j)
-    # second-order remainder of one step, |R(t)| <= 1/2 sum_ab M_ab |dx_a(t)| |dx_b(t)| with dx = x(t) - x_m:
-    # |dq_a| <= qd_a h / 2 everywhere; sigma_a = qd_a - v_a has zero mean on the step and |sigma_a'| <= qdd_max,
-    # so (Poincare-Wirtinger, constant (h / pi)^2) integral sigma_a^2 <= (qdd_max h / pi)^2 h and, by
-    # Cauchy-Schwarz, integral |sigma_a sigma_b| <= qdd_a qdd_b h^3 / pi^2 and integral |dq_a sigma_b| <=
-    # (qd_a h / 2) (qdd_b h / pi) h: the integral of |R| over the step is <= h * Q_int; its supremum is Q_sup.
-    d_int = np.concatenate([qd_step * h / 2, np.broadcast_to(qdd_max * h / np.pi, (S, nj))], axis=1)
+    # second-order remainder of one step, |R(t)| <= 1/2 sum_ab M_ab |dx_a(t)| |dx_b(t)| with dx = x(t) - x_m,
+    # tau = t - t_mid in [-h/2, h/2]: dq(t) = v* tau + rho(t) with |v*| <= w (the true secant speed) and |rho| <=
+    # qdd_max (h^2/4 - tau^2) / 2 (chord remainder), so |dq_a| <= w_a |tau| + c_a (h^2/4 - tau^2), c = qdd_max / 2,
+    # and integral |dq_a dq_b| <= w_a w_b h^3/12 + (w_a c_b + c_a w_b) h^4/32 + c_a c_b h^5/30; sigma = qd - v* has
+    # zero mean on the step and |sigma'| <= qdd_max, so (Poincare-Wirtinger, constant (h / pi)^2) integral
+    # sigma_a^2 <= (qdd_a h / pi)^2 h, and Cauchy-Schwarz bounds the mixed integrals: I_ab >= integral |dx_a dx_b|,
+    # the integral of |R| over the step <= 1/2 sum M_ab I_ab. Its supremum uses |dq| <= qd_step h / 2 and
+    # |sigma| <= qdd_max h / 2 (d_sup).
+    w = np.minimum(np.abs(v) + ev, np.asarray(qd_max, dtype=float))  # (S, n_j) the true secant speed's bound
+    c = np.broadcast_to(qdd_max / 2, (S, nj))
+    Iqq = (w[:, :, None] * w[:, None, :] * h**3 / 12
+           + (w[:, :, None] * c[:, None, :] + c[:, :, None] * w[:, None, :]) * h**4 / 32
+           + c[:, :, None] * c[:, None, :] * h**5 / 30)
+    sq = np.sqrt(np.diagonal(Iqq, axis1=1, axis2=2))  # (S, n_j) sqrt(integral dq_a^2)
+    sv = np.broadcast_to(qdd_max * h / np.pi * np.sqrt(h), (S, nj))  # sqrt(integral sigma_a^2)
+    I = np.empty((S, 2 * nj, 2 * nj))
+    I[:, :nj, :nj] = Iqq
+    I[:, :nj, nj:] = sq[:, :, None] * sv[:, None, :]
+    I[:, nj:, :nj] = np.swapaxes(I[:, :nj, nj:], 1, 2)
+    I[:, nj:, nj:] = sv[:, :, None] * sv[:, None, :]
+    I = up(I * (1 + 64 * 2.0**-53))
     d_sup = np.concatenate([qd_step * h / 2, np.broadcast_to(qdd_max * h / 2, (S, nj))], axis=1)
-    QP = 0.5 * np.einsum("sicab,sa,sb->sic", MP, d_int, d_int)  # (S, n_out, nc)
-    QF = 0.5 * np.einsum("sicab,sa,sb->sic", MF, d_int, d_int)
+    QP = 0.5 * np.einsum("sicab,sab->sic", MP, I)  # (S, n_out, nc): integral of |R_P| over the step
+    QF = 0.5 * np.einsum("sicab,sab->sic", MF, I)
     QF_sup = 0.5 * np.einsum("sicab,sa,sb->sic", MF, d_sup, d_sup)
     # the gradients at the TRUE secant state: the measured one's plus the encoder box's second derivatives times
     # eps, or the gradient's bound over the encoder box, whichever is smaller (both hold)
@@ -264,10 +279,11 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     if GPe is not None:
         aPq, aFq, aFv = np.minimum(aPq, GPe[..., :nj]), np.minimum(aFq, GFe[..., :nj]), np.minimum(aFv, GFe[..., nj:])
     # per-step truncation pieces (S, n_out, nc): coefficient of |s_w| and of |k_mid,w|
-    t_s = (np.einsum("sica,a->sic", aPq, qdd_max) * h**3 / 12 + h * QP
+    # (the slope part of k weights R_F by |tau| <= h / 2: integral |tau R_F| <= min(sup |R_F| h^2 / 4, h / 2 QF))
+    t_s = (np.einsum("sica,a->sic", aPq, qdd_max) * h**3 / 12 + QP
            + np.einsum("sica,sa->sic", aFq, qd_step) * h**3 / 12 + np.einsum("sica,a->sic", aFq, qdd_max) * h**4 / 32
-           + np.einsum("sica,a->sic", aFv, qdd_max) * h**3 / 8 + QF_sup * h**2 / 4)
-    t_k = np.einsum("sica,a->sic", aFq, qdd_max) * h**3 / 12 + h * QF
+           + np.einsum("sica,a->sic", aFv, qdd_max) * h**3 / 8 + np.minimum(QF_sup * h**2 / 4, QF * h / 2))
+    t_k = np.einsum("sica,a->sic", aFq, qdd_max) * h**3 / 12 + QF
     # encoder second-order: 1/2 eps^T M eps per step
     s2P = 0.5 * np.einsum("sicab,sa,sb->sic", MPe, eps, eps)
     s2F = 0.5 * np.einsum("sicab,sa,sb->sic", MFe, eps, eps)

@@ -10,18 +10,16 @@ The weak form of :mod:`ident.processing.weakform` applied to the H4 model of :mo
   ``d(J qd)/dq = Jd`` for a holonomic x(q)): functions of (q, qd) only;
 * ``Fv_i``: ``F = qd_i``; ``Fs_i``: ``F = sign(qd_i)``, certain or the interval [-1, 1] step by step.
 
-What is proven and what is not (``CertifiedEquation.info["not_proven"]``): the torque side, the Imot, Fv and Fs
-columns and the first-order terms of Mnac and Ibc are bounded from the ErrorSpec alone; the values and gradients of
-P and F at the measured secant states, and their gradients and second derivatives over each step's ENCODER box
-(the encoder's second-order term, and the transfer of the gradients to the true secant state), are rigorous
-enclosures (interval jets through a Krawczyk-verified nacelle pose, :mod:`ident.robots.h4_jets`; a step whose box
-cannot be verified keeps the sampled bound and is listed). The truncation's second-order remainder over each
-step's MOTION (the variation of J(q), Jd(q, qd) while the robot moves within one sample step) rests on bounds of
-the second derivatives that are SAMPLED (central differences at a subsample of the measured steps, maximum times
-:data:`CURVATURE_FACTOR`), not proven: plain interval jets over a step's motion box are far too wide (on
-``certified --quick`` it spans up to 7.5e-3 rad (median 1.4e-3) and 0.8 rad/s; the pose test fails on about half
-of the steps and the rest overestimate the sampled bounds 10^4 to 10^12 times). Its share of the radius is
-reported (``terms``), so that what rests on it is visible.
+What is proven and what is not (``CertifiedEquation.info["not_proven"]``): everything, from the ErrorSpec, once
+the interval jets of :mod:`ident.robots.h4_jets` verify each step's boxes: the values and gradients of P and F at
+the measured secant states, their gradients and second derivatives over each step's ENCODER box (the encoder's
+second-order term, and the transfer of the gradients to the true secant state) and their second derivatives over
+each step's MOTION (the truncation's second-order remainder), the latter as a Taylor model along the step (a tube
+``q_m + (v h / 2) tau`` with a small box around it; a plain box over the same span fails the pose test on about
+half of the steps of ``certified --quick``). A step whose box cannot be verified falls back to second-derivative
+bounds SAMPLED along the measured motion (central differences at every ``curvature_every``-th step, local maximum
+times :data:`CURVATURE_FACTOR`) and is listed in ``not_proven``. Stated: the robot stays in the assembly mode the
+forward kinematics of the measured positions gives, and numpy's sin/cos are within 4 ulp.
 """
 
 from __future__ import annotations
@@ -172,24 +170,38 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
         else:
             cols["measurement"][:, joint, offset + joint] = r1
             cols["truncation"][:, joint, offset + joint] = r2
-    curv = curvature_bounds(geometry, q, h, every=processing.curvature_every)
     qm = 0.5 * (q[:-1] + q[1:])
     pose = np.atleast_2d(forward_kinematics(geometry, qm))
 
     def evaluate(a, b):  # rigorous values and gradients at the measured secant states
         return point_jets(geometry, a, b, pose)
 
-    # the encoder boxes (measured secant state +- the position error's effect) and the jets over them; a step
-    # whose box cannot be verified keeps the sampled bounds (listed in not_proven)
+    # Per step, two sets of boxes, each enclosed by interval jets (module docstring); a step whose box cannot be
+    # verified falls back to the sampled bounds (listed in not_proven):
+    # * the encoder box: the measured secant state +- the position error's effect (e_m, e_v);
+    # * the motion tube: q_m + (v h / 2) tau +- (e_m + e_v h / 2 + qdd_max h^2 / 8) for tau in [-1, 1] (a Taylor
+    #   model in tau), v +- (e_v + qdd_max h / 2): every true state of the step and every point between it and
+    #   the true secant state (chord remainder qdd_max h^2 / 8, speed within qdd_max h / 2 of the secant's).
+    u = 2.0**-53
+    qddm = np.asarray(spec.qdd_max, dtype=float)
     em, ev = up(0.5 * (e[:-1] + e[1:])), up((e[:-1] + e[1:]) / h)
     vm = np.diff(q, axis=0) / h
-    GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, up(em + 2 * 2.0**-53 * np.abs(qm))), MR(vm, up(ev + 4 * 2.0**-53 * np.abs(vm))), pose)
-    for got, sampled in ((HP, curv[0]), (HF, curv[1])):
-        got[~proven] = sampled[~proven]
-    for got in (GP, GF):
-        got[~proven] = np.inf
-    value, meas, trunc, second = nonlinear_columns(evaluate, q, e, windows, kernel, spec.qd_max, spec.qdd_max, curv,
-                                                   encoder=(HP, HF, GP, GF))
+    em_box, ev_box = up(em + 2 * u * np.abs(qm)), up(ev + 4 * u * np.abs(vm))
+    a_tube = vm * (h / 2)
+    q_tube = MR(qm, up(em_box + up(ev_box * (h / 2)) + up(qddm * (h * h / 8)) + 4 * u * np.abs(a_tube)), a_tube)
+    v_tube = MR(vm, up(ev_box + up(qddm * (h / 2))))
+    GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, em_box), MR(vm, ev_box), pose)
+    _, HPm, _, HFm, proven_m = box_jets(geometry, q_tube, v_tube, pose)
+    if not (proven.all() and proven_m.all()):
+        curv = curvature_bounds(geometry, q, h, every=processing.curvature_every)
+        for got, sampled in ((HP, curv[0]), (HF, curv[1])):
+            got[~proven] = sampled[~proven]
+        for got, sampled in ((HPm, curv[0]), (HFm, curv[1])):
+            got[~proven_m] = sampled[~proven_m]
+        for got in (GP, GF):
+            got[~proven] = np.inf
+    value, meas, trunc, second = nonlinear_columns(evaluate, q, e, windows, kernel, spec.qd_max, spec.qdd_max,
+                                                   (HPm, HFm), encoder=(HP, HF, GP, GF))
     cols["value"][..., 4:6] = value
     cols["measurement"][..., 4:6] = meas
     cols["truncation"][..., 4:6] = trunc
@@ -210,11 +222,13 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
             "stride": processing.stride, "kernel_l1": l1, "rows": m, "windows": R,
             "sign_uncertain_steps": int(sign_uncertain.sum()), "steps": int(q.shape[0] - 1),
             "curvature_factor": CURVATURE_FACTOR, "curvature_every": processing.curvature_every,
-            "encoder_boxes_proven": int(proven.sum()),
-            "not_proven": ["truncation (Mnac, Ibc): its second-order part over each step's motion, from sampled "
-                           f"second-derivative bounds x {CURVATURE_FACTOR:g}"]
-            + ([f"second_order (Mnac, Ibc) on {int((~proven).sum())} of {proven.size} steps whose encoder box could "
-                f"not be verified: sampled second-derivative bounds x {CURVATURE_FACTOR:g}"] if not proven.all() else [])
+            "encoder_boxes_proven": int(proven.sum()), "motion_boxes_proven": int(proven_m.sum()),
+            "not_proven": ([f"second_order (Mnac, Ibc) on {int((~proven).sum())} of {proven.size} steps whose encoder "
+                            f"box could not be verified: sampled second-derivative bounds x {CURVATURE_FACTOR:g}"]
+                           if not proven.all() else [])
+            + ([f"truncation (Mnac, Ibc), its second-order part on {int((~proven_m).sum())} of {proven_m.size} steps "
+                f"whose motion box could not be verified: sampled second-derivative bounds x {CURVATURE_FACTOR:g}"]
+               if not proven_m.all() else [])
             + (["torque between samples: within torque_error of the samples' linear interpolation (stated: no "
                 "torque_rate)"] if spec.torque_timing == "sample" and spec.torque_rate is None else [])}
     return CertifiedEquation(Wc=cols["value"].reshape(m, p), D=D, y=y.reshape(m), bound=bound,

@@ -93,25 +93,28 @@ def pose_box(geometry, Q: MR, x_hat: np.ndarray) -> MR:
     centre = _loop(geometry, Jet(MR(Q.c)), Jet(MR(x_hat)))
     jx_c, jq_c = centre[3].v.c, centre[4].v.c
     C = -0.5 * np.linalg.inv(jx_c)  # ~ G_x^-1 (G_x = -2 Jx)
-    resid = _loop(geometry, Jet(Q), Jet(MR(x_hat)))[6].v  # G(x^, Q)
-    base = MR(x_hat) - ein("...ij,...j->...i", C, resid)
-    # first guess: twice the linearisation's reach plus twice the Newton correction, and a floor
     J0 = np.linalg.solve(jx_c, np.eye(N_JOINTS)[None] * jq_c[:, None, :])
-    rad = 2.0 * np.einsum("sij,sj->si", np.abs(J0), Q.r) + 2.0 * (np.abs(base.c - x_hat) + base.r) + 1e-12
-    X = MR(x_hat, rad)
+    # the guess x~ (a Taylor model in tau when Q is one: the linearisation along Q's linear part)
+    x_t = MR(x_hat) if Q.a is None else MR(x_hat, None, np.einsum("sij,sj->si", J0, Q.a))
+    resid = _loop(geometry, Jet(Q), Jet(x_t))[6].v  # G(x~, Q)
+    base = x_t - ein("...ij,...j->...i", C, resid)
+    off = np.abs(base.c - x_t.c) + base.r + (0 if base.a is None else np.abs(base.a - x_t.a))
+    # first guess: twice the linearisation's reach over Q's radius plus twice the Newton correction, and a floor
+    rad = 2.0 * np.einsum("sij,sj->si", np.abs(J0), Q.r) + 2.0 * off + 1e-12
+    inside = np.zeros(S, dtype=bool)
     for _ in range(_KRAWCZYK_TRIES):
+        X = MR(x_t.c, rad, x_t.a)
         jx = _loop(geometry, Jet(Q), Jet(X))[3].v
         M = MR(np.eye(N_JOINTS)) - ein("...ij,...jk->...ik", C, jx * -2.0)
-        K = base + ein("...ij,...j->...i", M, X - x_hat)
+        K = base + ein("...ij,...j->...i", M, MR(np.zeros_like(rad), rad))
         with np.errstate(all="ignore"):
-            inside = np.all((K.lo > X.lo) & (K.hi < X.hi), axis=1)
+            reach = up(up(np.abs(K.c - x_t.c) + K.r + (0 if K.a is None else np.abs(K.a - x_t.a))) * 1.0001)
+            inside = np.all(reach < rad, axis=1)
         if inside.all():
             return K
-        if not (np.all(np.isfinite(K.r)) and np.all(X.r < 1.0)):  # diverging: no verification possible
+        if not (np.all(np.isfinite(reach)) and np.all(rad < 1.0)):  # diverging: no verification possible
             break
-        lo, hi = np.minimum(K.lo, X.lo), np.maximum(K.hi, X.hi)
-        grown = MR.from_bounds(lo, hi)
-        X = MR(x_hat, np.where(inside[:, None], X.r, up(1.5 * np.maximum(np.abs(grown.c - x_hat) + grown.r, X.r))))
+        rad = np.where(inside[:, None], rad, up(1.5 * np.maximum(reach, rad)))
     bad = np.flatnonzero(~inside)
     raise KrawczykFailure(
         f"the nacelle pose could not be enclosed over the motor-angle boxes of {bad.size} of {S} steps (first: "
@@ -124,9 +127,7 @@ def _x_jet(geometry, Q: MR, X: MR, order: int) -> Jet:
     n = N_JOINTS
     _, _, _, jx, jq, _, _ = _loop(geometry, Jet(Q), Jet(X))
     jx_inv = inverse(jx.v)
-    J = jx_inv * jq.v[..., None, :]  # (S, 4, 4)
-    g = MR(np.zeros(X.shape + (n,)))
-    g.c[..., :N_JOINTS], g.r[..., :N_JOINTS] = J.c, J.r
+    g = jx_inv * jq.v[..., None, :]  # J (S, 4, 4): x's gradient in q
     if order < 2:
         return Jet(X, g)
     # T: the Hessian of G(x(q), q) with x's own Hessian left out; x_qq = (2 Jx)^-1 T = 0.5 Jx^-1 T
@@ -186,12 +187,14 @@ def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk
 def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int = 128):
     """Bounds over the boxes Q, V (S, 4) of |gradient| and |Hessian| of P and F (second-order jets, chunked).
 
-    Returns (GP, HP, GF, HF, proven): GP, GF (S, 4, 2, 8) and HP, HF (S, 4, 2, 8, 8) magnitudes, and a (S,) bool
-    mask of the steps whose boxes were verified; the bounds of the others are NaN (the caller must not use them:
-    a pose test or an interval inverse failed there, e.g. near a singular pose or for too wide a box)."""
+    Q may be a Taylor model in tau (a tube along each step's motion, :class:`~ident.numerics.jets.MR`).
+    Returns (GP, HP, GF, HF, proven): GP, GF (S, 4, 2, 8) and HP, HF (S, 4, 2, 8, 8) magnitudes over the whole
+    box (every tau), and a (S,) bool mask of the steps whose boxes were verified (the bounds of the others are NaN:
+    the caller must not use them; a pose test or an interval inverse failed there, e.g. near a singular pose or
+    for too wide a box)."""
     S = Q.shape[0]
-    GP, GF = np.full((S, 4, 2, 8), np.nan), np.full((S, 4, 2, 8), np.nan)
-    HP, HF = np.full((S, 4, 2, 8, 8), np.nan), np.full((S, 4, 2, 8, 8), np.nan)
+    out = [np.full((S, 4, 2, 8), np.nan), np.full((S, 4, 2, 8, 8), np.nan), np.full((S, 4, 2, 8), np.nan),
+           np.full((S, 4, 2, 8, 8), np.nan)]
     proven = np.zeros(S, dtype=bool)
     todo = [(i, min(i + chunk, S)) for i in range(0, S, chunk)]
     while todo:
@@ -203,6 +206,7 @@ def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int = 128):
                 m = (a + b) // 2
                 todo += [(a, m), (m, b)]
             continue
-        GP[a:b], HP[a:b], GF[a:b], HF[a:b] = P.g.mag(), P.h.mag(), F.g.mag(), F.h.mag()
+        for k, m in enumerate((P.g, P.h, F.g, F.h)):
+            out[k][a:b] = m.mag()
         proven[a:b] = True
-    return GP, HP, GF, HF, proven
+    return (*out, proven)

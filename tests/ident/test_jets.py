@@ -170,3 +170,54 @@ def test_box_hessians_bound_the_hessians_inside_and_failures_are_marked(geometry
             hf = (Fp.g.c - Fm.g.c) / (2 * d[a])
             assert np.all(np.abs(hp) <= HP[ok][..., a, :] * (1 + 1e-6) + 1e-6)
             assert np.all(np.abs(hf) <= HF[ok][..., a, :] * (1 + 1e-6) + 1e-4)
+
+
+def test_taylor_models_in_tau_enclose_every_tau_and_keep_the_linear_part():
+    """c + a tau +- r: products, contractions, sin, cos and the inverse enclose the pointwise results for every
+    sampled tau and remainder; the linear part is kept (a thin model along tau stays thin)."""
+    rng = np.random.default_rng(11)
+    n = 30
+    c1, a1, r1 = rng.normal(size=(3, n, 3, 3))
+    c2, a2, r2 = rng.normal(size=(3, n, 3, 3))
+    x = MR(c1 + 4 * np.eye(3), 1e-3 * np.abs(r1), 0.05 * a1)
+    y = MR(c2, 1e-3 * np.abs(r2), 0.05 * a2)
+    prod, cont = x * y, ein("...ij,...jk->...ik", x, y)
+    sx, cx, inv = x.sin(), x.cos(), inverse(x)
+    for _ in range(100):
+        tau = rng.uniform(-1, 1, (n, 1, 1))
+        px = x.c + x.a * tau + rng.uniform(-1, 1, x.shape) * x.r
+        py = y.c + y.a * tau + rng.uniform(-1, 1, y.shape) * y.r
+
+        def inside(m, value):
+            return np.all(np.abs(value - (m.c + m.a * tau)) <= m.r * (1 + 1e-12) + 1e-300)
+
+        assert inside(prod, px * py) and inside(cont, px @ py)
+        assert inside(sx, np.sin(px)) and inside(cx, np.cos(px)) and inside(inv, np.linalg.inv(px))
+    assert np.max(prod.r) < 0.05 * np.max(np.abs(prod.a))  # the tau-dependence is carried, not widened
+
+
+def test_motion_tube_hessians_bound_the_hessians_along_the_tube(geometry):
+    """A Taylor-model tube q_m + (v h / 2) tau +- beta: the Hessian bounds hold at points anywhere along it, where a
+    plain box over the same span could not even be verified."""
+    q, v = _poses(geometry, 6, 12)
+    v = v * 4  # fast motion: 8 rad/s, a 4e-3 rad half-step
+    h, beta_q, beta_v = 1e-3, 3e-4, 0.5
+    Q = MR(q, np.full_like(q, beta_q), v * h / 2)
+    V = MR(v, np.full_like(v, beta_v))
+    x_hat = forward_kinematics(geometry, q)
+    GP, HP, GF, HF, proven = box_jets(geometry, Q, V, x_hat)
+    assert proven.all()
+    rng = np.random.default_rng(13)
+    d = np.array([1e-6] * 4 + [1e-4] * 4)
+    for _ in range(4):
+        tau = rng.uniform(-1, 1, (6, 1))
+        zq = q + v * h / 2 * tau + rng.uniform(-0.5, 0.5, q.shape) * beta_q
+        zv = v + rng.uniform(-0.5, 0.5, v.shape) * beta_v
+        for a in range(8):
+            dz = np.eye(8)[a] * d[a]
+            Pp, Fp = point_jets(geometry, zq + dz[:4], zv + dz[4:], forward_kinematics(geometry, zq + dz[:4]))
+            Pm, Fm = point_jets(geometry, zq - dz[:4], zv - dz[4:], forward_kinematics(geometry, zq - dz[:4]))
+            assert np.all(np.abs((Pp.g.c - Pm.g.c) / (2 * d[a])) <= HP[..., a, :] * (1 + 1e-6) + 1e-6)
+            assert np.all(np.abs((Fp.g.c - Fm.g.c) / (2 * d[a])) <= HF[..., a, :] * (1 + 1e-6) + 1e-4)
+    plain = box_jets(geometry, MR(q, np.abs(v) * h / 2 + beta_q), V, x_hat)[4]
+    assert not plain.all()
