@@ -400,14 +400,27 @@ def _const_ein(spec, const, jet: Jet, left: bool) -> Jet:
                None if jet.h is None else one("YZ", jet.h))
 
 
-def jet_inverse(m: Jet) -> Jet:
+def jet_inverse(m: Jet, centre=None, rounds: int = 2) -> Jet:
     """The jet of ``M^-1`` for a jet of square matrices (..., k, k): ``Y = M^-1``, ``Y_a = -Y M_a Y``,
-    ``Y_ab = -(T_a Y_b + T_b Y_a) - Y M_ab Y`` with ``T_a = Y M_a``."""
+    ``Y_ab = -(T_a Y_b + T_b Y_a) - Y M_ab Y`` with ``T_a = Y M_a``.
+
+    centre : None, or (Y0, dz): an enclosure Y0 (..., k, k) of the inverse at the box's centre z0 and dz (..., n)
+    an enclosure of ``z - z0`` over the box; then Y is narrowed ``rounds`` times by the centred form
+    ``Y0 + Y_z dz`` (the plain interval inverse over a box is widened by the conditioning of M)."""
     y = inverse(m.v)
     if m.g is None:
         return Jet(y)
-    t = ein("...ij,...jkY->...ikY", y, m.g)
-    g = -ein("...ikY,...kl->...ilY", t, y)
+
+    def grad(y):
+        t = ein("...ij,...jkY->...ikY", y, m.g)
+        return t, -ein("...ikY,...kl->...ilY", t, y)
+
+    t, g = grad(y)
+    if centre is not None:
+        y0, dz = centre
+        for _ in range(rounds):
+            y = _tighter(y, y0 + ein("...ilY,...Y->...il", g, dz))
+            t, g = grad(y)
     if m.h is None:
         return Jet(y, g)
     cross = ein("...ikY,...klZ->...ilYZ", t, g)
@@ -416,4 +429,14 @@ def jet_inverse(m: Jet) -> Jet:
     return Jet(y, g, h)
 
 
-__all__ += ["jet_ein", "jet_inverse", "ein"]
+def _tighter(m1: MR, m2: MR) -> MR:
+    """Elementwise the narrower of two enclosures of the same quantity (each element of either is valid)."""
+    a1 = np.zeros_like(m1.c) if m1.a is None else m1.a
+    a2 = np.zeros_like(m2.c) if m2.a is None else m2.a
+    first = np.abs(a1) + m1.r <= np.abs(a2) + m2.r
+    a = None if m1.a is None and m2.a is None else np.where(first, a1, a2)
+    return MR(np.where(first, m1.c, m2.c), np.where(first, m1.r, m2.r), a)
+
+
+__all__ += ["jet_ein", "jet_inverse", "ein", "narrower"]
+narrower = _tighter

@@ -27,12 +27,13 @@ from __future__ import annotations
 import numpy as np
 
 from h4bench.ident.numerics.interval import up
-from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse
+from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse, narrower
 
 __all__ = ["KrawczykFailure", "box_jets", "nacelle_jets", "point_jets", "pose_box"]
 
 N_JOINTS = 4
 _KRAWCZYK_TRIES = 6
+CENTRED_ROUNDS = 2  # centred-form rounds for the pose's gradient over a box (_x_jet)
 
 
 class KrawczykFailure(ArithmeticError):
@@ -122,19 +123,33 @@ def pose_box(geometry, Q: MR, x_hat: np.ndarray) -> MR:
         "singularity")
 
 
-def _x_jet(geometry, Q: MR, X: MR, order: int) -> Jet:
-    """The pose as a jet in q (4 variables): value X, gradient J, Hessian x_qq."""
+def _x_jet(geometry, Q: MR, X: MR, order: int, x_hat=None, centred: int = 0) -> Jet:
+    """The pose as a jet in q (4 variables): value X, gradient J, Hessian x_qq.
+
+    centred : rounds of the centred form ``J(Q) in J(q^) + x_qq(Q) (Q - q^)`` (q^ = Q's centre, x_hat its pose),
+    each followed by x_qq from the narrower J: the plain interval J over a box is widened by the conditioning of
+    Jx, the centred one only by x_qq times the box's radius."""
     n = N_JOINTS
     _, _, _, jx, jq, _, _ = _loop(geometry, Jet(Q), Jet(X))
     jx_inv = inverse(jx.v)
     g = jx_inv * jq.v[..., None, :]  # J (S, 4, 4): x's gradient in q
     if order < 2:
         return Jet(X, g)
-    # T: the Hessian of G(x(q), q) with x's own Hessian left out; x_qq = (2 Jx)^-1 T = 0.5 Jx^-1 T
-    xj = Jet(X, g, MR(np.zeros(X.shape + (n, n))))
     qj = Jet.variables(Q, n, 0, 2)
-    T = _loop(geometry, qj, xj)[6].h
-    return Jet(X, g, ein("...ij,...jYZ->...iYZ", jx_inv, T) * 0.5)
+
+    def hessian(grad):  # T: the Hessian of G(x(q), q) without x's own; x_qq = (2 Jx)^-1 T = 0.5 Jx^-1 T
+        T = _loop(geometry, qj, Jet(X, grad, MR(np.zeros(X.shape + (n, n)))))[6].h
+        return ein("...ij,...jYZ->...iYZ", jx_inv, T) * 0.5
+
+    xqq = hessian(g)
+    if centred:
+        q_hat = MR(Q.c)
+        J_hat = _x_jet(geometry, q_hat, pose_box(geometry, q_hat, x_hat), 1).g
+        dQ = MR(np.zeros_like(Q.c), Q.r, Q.a)  # Q - q^
+        for _ in range(centred):
+            g = narrower(g, J_hat + ein("...ijk,...k->...ij", xqq, dQ))
+            xqq = narrower(xqq, hessian(g))
+    return Jet(X, g, xqq)
 
 
 def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
@@ -147,10 +162,15 @@ def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
     n = 2 * N_JOINTS
     X = pose_box(geometry, Q, x_hat)
     # everything that depends on q alone in the 4 variables q (a quarter of the Hessian entries), then padded
-    x = _x_jet(geometry, Q, X, order)
+    x = _x_jet(geometry, Q, X, order, x_hat=x_hat, centred=CENTRED_ROUNDS if order == 2 else 0)
     q = Jet.variables(Q, N_JOINTS, 0, order)
     ab, pb, dc, jx, jq, ucross, _ = _loop(geometry, q, x)
-    jinv = jet_inverse(jx)
+    centre = None
+    if order == 2:  # the centred form for Jx^-1 over the box (jet_inverse)
+        q_hat = MR(Q.c)
+        jx_hat = _loop(geometry, Jet(q_hat), Jet(pose_box(geometry, q_hat, x_hat)))[3].v
+        centre = (inverse(jx_hat), MR(np.zeros_like(Q.c), Q.r, Q.a))
+    jinv = jet_inverse(jx, centre)
     J = jinv * jq[..., None, :]
     ab, pb, dc, ucross, jinv, J = (j.pad(n) for j in (ab, pb, dc, ucross, jinv, J))
     qd = Jet.variables(V, n, N_JOINTS, order)
