@@ -129,17 +129,27 @@ class MR:
 
     def __mul__(self, other) -> MR:
         o = _mr(other)
+        if o.a is None and not np.any(o.r):  # times an exact array (a constant): no radius of its own
+            c = self.c * o.c
+            a = None if self.a is None else self.a * o.c
+            err = np.abs(c) if a is None else np.abs(c) + np.abs(a)
+            return MR(c, (self.r * np.abs(o.c) + U * err) * _ONE + _TINY, a)
         if self.a is None and o.a is None:
             c = self.c * o.c
             r = np.abs(self.c) * o.r + self.r * (np.abs(o.c) + o.r) + U * np.abs(c)
             return MR(c, r * _ONE + _TINY)
-        a1 = np.zeros_like(self.c) if self.a is None else self.a
-        a2 = np.zeros_like(o.c) if o.a is None else o.a
-        aa = a1 * a2  # the tau^2 part: 1/2 into c, +-1/2 into r
-        c = self.c * o.c + 0.5 * aa
-        a = self.c * a2 + a1 * o.c
-        m1, m2 = np.abs(self.c) + np.abs(a1), np.abs(o.c) + np.abs(a2)
-        r = m1 * o.r + self.r * (m2 + o.r) + 0.5 * np.abs(aa) + 4 * U * m1 * m2
+        m1 = np.abs(self.c) if self.a is None else np.abs(self.c) + np.abs(self.a)
+        m2 = np.abs(o.c) if o.a is None else np.abs(o.c) + np.abs(o.a)
+        c = self.c * o.c
+        if self.a is not None and o.a is not None:
+            aa = self.a * o.a  # the tau^2 part: 1/2 into c, +-1/2 into r
+            c = c + 0.5 * aa
+            a = self.c * o.a + self.a * o.c
+            extra = 0.5 * np.abs(aa)
+        else:
+            a = self.c * o.a if self.a is None else self.a * o.c
+            extra = 0.0
+        r = m1 * o.r + self.r * (m2 + o.r) + extra + 4 * U * m1 * m2
         return MR(c, r * _ONE + _TINY, a)
 
     __rmul__ = __mul__
