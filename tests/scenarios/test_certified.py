@@ -20,7 +20,7 @@ def run_and_spec():
     return run_experiment(spec, 0, estimate=False), spec
 
 
-def _short(run_, spec, n=1500, **change):
+def _short(run_, spec, n=600, **change):
     """The certificate on the first n samples with ErrorSpec fields changed."""
     es = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
     es = dataclasses.replace(es, **change)
