@@ -190,7 +190,12 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     a_tube = vm * (h / 2)
     q_tube = MR(qm, up(em_box + up(ev_box * (h / 2)) + up(qddm * (h * h / 8)) + 4 * u * np.abs(a_tube)), a_tube)
     v_tube = MR(vm, up(ev_box + up(qddm * (h / 2))))
-    GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, em_box), MR(vm, ev_box), pose)
+    if np.any(e):
+        GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, em_box), MR(vm, ev_box), pose)
+    else:  # exact positions (the certificate's truth equation): no encoder term, nothing to bound
+        GP, GF = np.full((qm.shape[0], 4, 2, 8), np.inf), np.full((qm.shape[0], 4, 2, 8), np.inf)
+        HP, HF = np.zeros((qm.shape[0], 4, 2, 8, 8)), np.zeros((qm.shape[0], 4, 2, 8, 8))
+        proven = np.ones(qm.shape[0], dtype=bool)
     _, HPm, _, HFm, proven_m = box_jets(geometry, q_tube, v_tube, pose)
     if not (proven.all() and proven_m.all()):
         curv = curvature_bounds(geometry, q, h, every=processing.curvature_every)
