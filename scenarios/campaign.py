@@ -23,6 +23,7 @@ import concurrent.futures
 import ctypes
 import hashlib
 import importlib.metadata
+import importlib.util
 import json
 import multiprocessing
 import os
@@ -38,7 +39,7 @@ from h4bench.scenarios import plugins
 from h4bench.scenarios.rundir import prepare_folder, write_json
 from h4bench.scenarios.spec import ScenarioError
 from h4bench.scenarios.threads import single_blas_thread
-from h4bench.scenarios.timings import TimedJob, imported_packages
+from h4bench.scenarios.timings import TimedJob
 
 # spec keys that do not change what a run computes
 _NOT_INPUTS = {"name", "description", "quick", "quick_applied"}
@@ -69,17 +70,37 @@ def _sha256_bytes(data: bytes) -> str:
 _CODE_HASH: str | None = None
 
 
+def source_files() -> list[tuple[str, Path]]:
+    """The project's source files as ``(name, path)``: every ``*.py`` then every ``*.toml`` under each of
+    ``h4bench.SUBPACKAGES``' folders, found on disk (``importlib.util.find_spec``: no package is imported), named
+    by their path from the folder's parent (``sim/simulate.py``)."""
+    out = []
+    for pkg in h4bench.SUBPACKAGES:
+        spec = importlib.util.find_spec(f"h4bench.{pkg}")
+        if spec is None or not spec.submodule_search_locations:  # pragma: no cover - a broken installation
+            raise ImportError(f"h4bench.{pkg} is not installed")
+        for folder in spec.submodule_search_locations:
+            root = Path(folder)
+            for f in sorted(root.rglob("*.py")) + sorted(root.rglob("*.toml")):
+                out.append((str(f.relative_to(root.parent)), f))
+    return out
+
+
+def hash_files(files: list[tuple[str, Path]]) -> str:
+    """SHA-256 over ``(name, path)`` pairs: each name, then the file's bytes, in the order given."""
+    h = hashlib.sha256()
+    for name, path in files:
+        h.update(name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 def code_hash() -> str:
-    """SHA-256 over the source of the project's packages and models (computed once per process)."""
+    """SHA-256 over the source of the project's packages (:func:`source_files`), computed once per process
+    without importing them."""
     global _CODE_HASH
     if _CODE_HASH is None:
-        h = hashlib.sha256()
-        for pkg in h4bench.SUBPACKAGES:
-            root = Path(importlib.import_module(f"h4bench.{pkg}").__file__).parent
-            for f in sorted(root.rglob("*.py")) + sorted(root.rglob("*.toml")):
-                h.update(str(f.relative_to(root.parent)).encode())
-                h.update(f.read_bytes())
-        _CODE_HASH = h.hexdigest()
+        _CODE_HASH = hash_files(source_files())
     return _CODE_HASH
 
 
@@ -267,7 +288,6 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     n = camp["runs"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ScenarioError(f"campaign.runs must be an integer >= 1, got {n!r}")
-    imports = imported_packages()  # timed apart: code_hash imports them, and forked workers inherit them
     prov = provenance(spec, seed)
     out = prepare_folder(out, what={"scenario": spec["name"], "kind": spec["kind"]})
     saved_path = out / "campaign.json"
@@ -294,7 +314,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     reused = len(runs)
     todo = [i for i in range(n) if i not in runs]
     progress(f"campaign (reused {reused})" if reused else "campaign", reused, n)
-    sections = {"imports": imports, "setup": time.perf_counter() - started - imports, "io": 0.0}
+    sections = {"setup": time.perf_counter() - started, "io": 0.0}
     started = time.perf_counter()
     errors: dict[int, str] = {}
     if todo:

@@ -237,7 +237,6 @@ def run(
     still written, the failures in the methods' entries); 130 interrupted.
     """
     from h4bench.scenarios.campaign import CampaignInterrupted
-    from h4bench.scenarios.identify import EXIT_METHOD_FAILED
     from h4bench.scenarios.runner import run_scenario
 
     _importable_from_cwd(methods)
@@ -262,6 +261,8 @@ def run(
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
+    from h4bench.scenarios.identify import EXIT_METHOD_FAILED  # here: the kind's own imports only, before the run
+
     _exit_if_failed(result, EXIT_METHOD_FAILED)
 
 

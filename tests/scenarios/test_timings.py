@@ -31,7 +31,6 @@ def test_campaign_timings_overhead_is_wall_minus_run_time_per_worker():
     t = campaign_timings(runs, [0, 1], 2, time.time() - 10.0, {"setup": 0.5})
     assert t["wall"] == pytest.approx(10.0, abs=0.5)
     assert t["overhead"] == pytest.approx(t["wall"] - 3.0) and t["overhead_share"] == pytest.approx(t["overhead"] / t["wall"])
-    assert t["overhead_share_without_imports"] == pytest.approx(t["overhead_share"])  # no imports section
     assert t["stages"]["simulation"] == {"total": 4.0, "median": 2.0}
     assert t["methods"]["hull"]["total"] == pytest.approx(1.2) and t["trajectory_sources"] == {"disk": 1, "memory": 1}
     assert any("Where the time went" in line for line in timing_lines(t))
@@ -49,7 +48,7 @@ def test_the_engine_times_runs_and_its_own_sections(tmp_path):
     spec["campaign"].update(runs=3, workers=1)
     runs, info = camp.run_many(spec, 1000, tmp_path / "c", sleepy_job, lambda *a: None)
     staged = info["timings"]
-    assert staged["computed"] == [0, 1, 2] and set(staged["sections"]) >= {"imports", "setup", "io", "pool"}
+    assert staged["computed"] == [0, 1, 2] and set(staged["sections"]) >= {"setup", "io", "pool"}
     assert all(0.05 <= r["timings"]["run"] < 5.0 and r["timings"]["io"] > 0 for r in runs)
     t = campaign_timings(runs, staged["computed"], 1, staged["started"], staged["sections"])
     assert t["run_seconds"]["total"] == pytest.approx(sum(r["timings"]["run"] for r in runs))
