@@ -58,6 +58,8 @@ def test_the_engine_times_runs_and_its_own_sections(tmp_path):
 
 
 def test_single_blas_thread_and_the_original_counts_in_a_fresh_process():
+    """The worker's thread limit and the design caches' keys, which hold the counts: a design computed under
+    other counts is never reused (both keys differ between 1 and 2 threads, and equal again at 2)."""
     import json
     import os
     import subprocess
@@ -65,16 +67,23 @@ def test_single_blas_thread_and_the_original_counts_in_a_fresh_process():
 
     code = ("import json, numpy as np\n"
             "from h4bench.scenarios import threads\n"
+            "from h4bench import blas, sim\n"
+            "from h4bench.sim.design_cache import design_key\n"
+            "from h4bench.trajectories import excitation as ex\n"
             "import scipy.linalg\n"
-            "counts = lambda: [g() for _, _, g in threads._openblas_libraries()]\n"
-            "before = counts()\n"
+            "counts = lambda: [g() for _, _, g in blas.openblas_libraries()]\n"
+            "g = sim.H4Geometry.from_model(sim.load_model())\n"
+            "keys = lambda: [design_key(np.ones(4), np.ones(4), 10.0, 1e-3, 60.0, None), ex.cache_key(ex.cache_inputs("
+            "g, 10.0, 0, ex.Limits(), 'h', ex.as_processing(None, 1e-3), None, ex.as_theta(None), ex.DEFAULT_OPTIONS))]\n"
+            "before, k2 = counts(), keys()\n"
             "n = len(threads.single_blas_thread())\n"
-            "one = counts()\n"
+            "one, k1 = counts(), keys()\n"
             "with threads.original_blas_threads():\n"
-            "    inside = counts()\n"
+            "    inside, k2_again = counts(), keys()\n"
             "a = np.arange(9.0).reshape(3, 3)\n"
-            "print(json.dumps([n, before, one, inside, counts(), float((a @ a)[0, 0])]))\n")
+            "print(json.dumps([n, before, one, inside, counts(), float((a @ a)[0, 0]), k2, k1, k2_again]))\n")
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "2"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env).stdout
-    n, before, one, inside, after, check = json.loads(out)
+    n, before, one, inside, after, check, k2, k1, k2_again = json.loads(out)
     assert n >= 1 and before == [2] * n and one == after == [1] * n and inside == before and check == 15.0
+    assert k2 == k2_again and k1[0] != k2[0] and k1[1] != k2[1]
