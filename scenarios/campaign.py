@@ -279,10 +279,26 @@ def check_same_campaign(out: Path, prov: dict,
             f"--out {str(out)!r} holds a campaign computed from other inputs: {'; '.join(diff)}. {hint}")
 
 
-def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = False) -> tuple[list[dict], dict]:
+def _import_quietly(modules: tuple[str, ...]) -> None:
+    """Import ``modules`` (a thread's target; a module that fails is imported again, and fails loudly, where it
+    is used)."""
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - only a head start: the user of the module reports the error
+            return
+
+
+def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = False,
+             report_imports: tuple[str, ...] = ()) -> tuple[list[dict], dict]:
     """Run ``job(spec, index, seed) -> dict`` for every index of ``spec['campaign']['runs']`` into ``out``,
     resuming what matches; returns (runs in index order, info with ``reused``, ``computed``, ``seconds``,
-    ``runs_per_minute``). ``job`` must be a picklable top-level function."""
+    ``runs_per_minute``). ``job`` must be a picklable top-level function.
+
+    report_imports : modules the kind's report will import after the runs (e.g. ``matplotlib.pyplot``, most of
+    a second): on a local pool they are imported by a thread of this process while it waits for the runs, once
+    every worker is started (a process pool forks all its workers at the first submission), so a fork never
+    copies a half-done import."""
     camp = spec["campaign"]
     started_wall, started = time.time(), time.perf_counter()
     n = camp["runs"]
@@ -327,6 +343,9 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                 plugins.ship_plugins(client, spec.get("estimators", {}).get("methods", []))
             with _TermAsInterrupt():
                 futures = {executor.submit(TimedJob(job), spec, i, seed): i for i in todo}
+                if client is None and report_imports and multiprocessing.get_start_method() == "fork":
+                    threading.Thread(target=_import_quietly, args=(tuple(report_imports),), daemon=True,
+                                     name="report-imports").start()
                 for fut in concurrent.futures.as_completed(futures):
                     i = futures[fut]
                     try:

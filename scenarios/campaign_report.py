@@ -10,7 +10,11 @@ import numpy as np
 
 from h4bench.scenarios.timings import campaign_timings, timing_lines
 
-__all__ = ["plot_relative_widths", "summarise", "summarise_methods", "throughput_lines", "write_outputs"]
+__all__ = ["REPORT_IMPORTS", "plot_relative_widths", "summarise", "summarise_methods", "throughput_lines",
+           "write_outputs"]
+
+#: What :func:`write_outputs` imports (plots, the Clopper-Pearson quantiles): ``run_many(report_imports=...)``
+REPORT_IMPORTS = ("matplotlib.pyplot", "scipy.special")
 
 
 def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: list[str], method_line,
