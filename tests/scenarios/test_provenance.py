@@ -65,8 +65,16 @@ def test_the_code_hash_and_the_spec_import_no_other_package_or_kind():
         "registry.load_spec('enclosure')\n"
         "registry.get('enclosure')\n"
         "kinds = sorted(m.rsplit('.', 1)[1] for m in sys.modules if m.startswith('h4bench.scenarios.kinds.'))\n"
-        "print(json.dumps({'hashed': hashed, 'kinds': kinds, 'toppra': 'toppra' in sys.modules}))\n")
+        "from h4bench.ident.estimators import registry as est\n"
+        "spec = registry.load_spec('enclosure')\n"
+        "spec['estimators']['methods'] = list(est.BUILTINS)\n"
+        "before = set(sys.modules)\n"
+        "campaign.provenance(spec, 0)\n"
+        "estimators = sorted(m for m in set(sys.modules) - before if m.startswith('h4bench.ident.estimators.'))\n"
+        "print(json.dumps({'hashed': hashed, 'kinds': kinds, 'toppra': 'toppra' in sys.modules,\n"
+        "                  'estimators': estimators}))\n")
     assert out["hashed"] == []
+    assert out["estimators"] == []  # "name in BUILTINS" does not import the built-in's module
     # enclosure itself, and tx40 whose SPEC_DEFAULTS is not a literal (it is built from another module's table)
     assert out["kinds"] == ["enclosure", "tx40"]
     assert out["toppra"] is False  # trajectories.timing (toppra) is imported on first use only
