@@ -13,6 +13,8 @@ from typing import Optional
 
 import typer
 
+from h4bench.scenarios.exit_codes import EXIT_INCONSISTENT, EXIT_METHOD_FAILED
+
 app = typer.Typer(
     name="h4bench",
     help="Guaranteed identification of the H4 parallel robot's dynamic parameters: simulate, identify, check.",
@@ -261,8 +263,6 @@ def run(
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
-    from h4bench.scenarios.identify import EXIT_METHOD_FAILED  # here: the kind's own imports only, before the run
-
     _exit_if_failed(result, EXIT_METHOD_FAILED)
 
 
@@ -380,7 +380,7 @@ def identify(
     4 some requested method failed (raised, exited, timed out, changed its inputs, returned no box; result.json
     still written, the failure in its entry).
     """
-    from h4bench.scenarios.identify import EXIT_INCONSISTENT, EXIT_METHOD_FAILED, METHODS, OptionError
+    from h4bench.scenarios.identify import METHODS, OptionError
     from h4bench.scenarios.judging import parse_methods
 
     _importable_from_cwd(method)
