@@ -56,6 +56,43 @@ of the 37.7 s under that load. A second run of the final code (load about 4): ba
 17.8 s (4.03x; base 41.3 s, 9.38x: 2.33x faster), the campaign 14.3 s (3.23x), its pool 12.7 s (2.87x; base
 35.3 s), overhead 11.8 % (5.8 % without the parent's package imports, 0.86 s, that the forked worker inherits);
 all: 21.0 runs/min against 10.7 (1.97x; pools 15.3 s against 38.3 s), overhead 23.9 % (report 3.4 s).
+
+Start-up and report (cProfile of the command's own process, 2 shared cores, commit f537d8e): before the pool,
+``h4bench run enclosure`` imported every scenario kind (``registry.load_spec``: the certified kind's
+``scenarios.certificate`` -> scipy.signal), ``scenarios.identify`` for one exit code (the processing chain,
+scipy.signal: 1.37 s under the profiler) and every sub-package for the provenance's code hash
+(``trajectories.timing`` -> toppra: 1.23 s); measured without the profiler, the parent's start-up up to the pool
+(CLI import, spec, kind, provenance) took 1.67-2.38 s and 1238 modules. After the runs: the Clopper-Pearson
+quantiles imported scipy.stats (1.25 s), ``widths.png`` spent 1.65 s in ``tight_layout`` and 2.0 s in
+``savefig`` (``--methods all``: ten panels of 14 boxes, seven Line2D each), matplotlib.pyplot 0.7 s. And with
+``--methods all`` the provenance's ``name in BUILTINS`` imported every estimator (Mapping's ``__contains__``
+looks the name up): 1.5 s of set-up.
+
+After (branch ``speed``): the kind registry lists kinds from their files and imports only the one run
+(``SPEC_DEFAULTS`` read as literals); the code hash reads the source files found on disk; toppra is imported on
+first use; the exit codes live in ``scenarios.exit_codes``; ``BUILTINS`` answers ``in`` from its names; the
+Clopper-Pearson quantiles come from ``scipy.special.betaincinv`` (bit for bit ``beta.ppf``); the plots use fixed
+margins and draw each panel's boxes as three artists; the report's imports are made by a thread of the parent
+while it waits for the forked pool. The parent's start-up up to the pool: 0.41-0.57 s, 385 modules. The report of
+``--methods all``: 1.2-2.0 s under load 2-3 (was 4.9 s under the profiler, about 3.4 s without).
+
+Profile of one full-size run with ``--methods all`` (a worker's second run, warm caches, cProfile, load about 2),
+1.88 s: simulation 0.70 (the loop 0.61), the methods 0.77 (zonotope 0.27: every one of the 12 295 rows cuts, a
+sequential update per row; hull 0.18: 106 HiGHS runs; ellipsoid 0.12; contractor 0.09: 7 Jacobi sweeps;
+parallelotope 0.08; cgsp 0.02), the IV instruments 0.12, the error budget 0.12, processing 0.12, the H4 regressor
+3 evaluations 0.24. The parallelotope now leaves out, in blocks, the rows its step would skip (978 of 12 295 rows
+cut; ``ident.estimators._common.RowScan``, one matrix product per block with a margin far above the rounding
+difference): 0.10 -> 0.05 s alone, the same boxes bit for bit. The same idea does not pay for the ellipsoid (a
+cut every 3.6 rows: a block test after each costs more than the rows it saves) nor the zonotope (every row
+cuts); the contractor is already vectorised over rows. The width analysis' LPs no longer run in campaigns
+(``explain = false`` in both campaign specs; on demand with ``--only``), so there is nothing left to warm-start.
+
+Measured (2026-12-02, branch ``speed``, one run of this script with ``--base-python`` on a venv of d6155bc, load
+2-3 from other engineers' jobs): bare stepping 8 x 10 s median 2.93 s; ``--methods hull``, 8 runs, 1 worker: the
+command 13.2 s (4.51x; base 29.3 s, 10.0x: 2.22x faster), the campaign 11.5 s (3.93x), its pool 10.9 s (3.72x),
+overhead 8.6 % (setup 0.17 s, report 0.44 s); ``--methods all``, 8 runs, 2 workers: 22.6 runs/min against the
+base's 12.0 (1.89x), overhead 12.6 % (report 1.24 s); its method medians per run under the two workers'
+contention: zonotope 0.50, hull 0.38, ellipsoid 0.23, contractor 0.17, parallelotope 0.10 s.
 """
 
 from __future__ import annotations

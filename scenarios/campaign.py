@@ -298,7 +298,8 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     report_imports : modules the kind's report will import after the runs (e.g. ``matplotlib.pyplot``, most of
     a second): on a local pool they are imported by a thread of this process while it waits for the runs, once
     every worker is started (a process pool forks all its workers at the first submission), so a fork never
-    copies a half-done import."""
+    copies a half-done import; the thread is joined before the runs are returned, so the report never meets a
+    half-done import either."""
     camp = spec["campaign"]
     started_wall, started = time.time(), time.perf_counter()
     n = camp["runs"]
@@ -333,6 +334,7 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     sections = {"setup": time.perf_counter() - started, "io": 0.0}
     started = time.perf_counter()
     errors: dict[int, str] = {}
+    importer = None
     if todo:
         children = _pool_children()  # the workers are the children started after this
         executor, client = _executor(camp)
@@ -344,8 +346,9 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
             with _TermAsInterrupt():
                 futures = {executor.submit(TimedJob(job), spec, i, seed): i for i in todo}
                 if client is None and report_imports and multiprocessing.get_start_method() == "fork":
-                    threading.Thread(target=_import_quietly, args=(tuple(report_imports),), daemon=True,
-                                     name="report-imports").start()
+                    importer = threading.Thread(target=_import_quietly, args=(tuple(report_imports),),
+                                                daemon=True, name="report-imports")
+                    importer.start()
                 for fut in concurrent.futures.as_completed(futures):
                     i = futures[fut]
                     try:
@@ -376,6 +379,8 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                 client.close()
             elif not interrupted:
                 executor.shutdown(wait=True, cancel_futures=True)
+    if importer is not None:
+        importer.join()  # done long ago unless the runs were quicker: the report never races a half-done import
     seconds = time.perf_counter() - started
     if errors:
         first = min(errors)

@@ -52,10 +52,7 @@ def test_the_engine_times_runs_and_its_own_sections(tmp_path):
     # its user (no error here)
     runs, info = camp.run_many(spec, 1000, tmp_path / "c", sleepy_job, lambda *a: None,
                                report_imports=("colorsys", "no_such_module_of_the_report"))
-    deadline = time.monotonic() + 10.0
-    while "colorsys" not in sys.modules and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert "colorsys" in sys.modules
+    assert "colorsys" in sys.modules  # the thread was joined before the runs came back
     staged = info["timings"]
     assert staged["computed"] == [0, 1, 2] and set(staged["sections"]) >= {"setup", "io", "pool"}
     assert all(0.05 <= r["timings"]["run"] < 5.0 and r["timings"]["io"] > 0 for r in runs)
