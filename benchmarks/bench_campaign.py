@@ -87,12 +87,14 @@ cut every 3.6 rows: a block test after each costs more than the rows it saves) n
 cuts); the contractor is already vectorised over rows. The width analysis' LPs no longer run in campaigns
 (``explain = false`` in both campaign specs; on demand with ``--only``), so there is nothing left to warm-start.
 
-Measured (2026-12-02, branch ``speed``, one run of this script with ``--base-python`` on a venv of d6155bc, load
-2-3 from other engineers' jobs): bare stepping 8 x 10 s median 2.93 s; ``--methods hull``, 8 runs, 1 worker: the
-command 13.2 s (4.51x; base 29.3 s, 10.0x: 2.22x faster), the campaign 11.5 s (3.93x), its pool 10.9 s (3.72x),
-overhead 8.6 % (setup 0.17 s, report 0.44 s); ``--methods all``, 8 runs, 2 workers: 22.6 runs/min against the
-base's 12.0 (1.89x), overhead 12.6 % (report 1.24 s); its method medians per run under the two workers'
-contention: zonotope 0.50, hull 0.38, ellipsoid 0.23, contractor 0.17, parallelotope 0.10 s.
+Measured (2026-12-02, branch ``speed``, one run of this script with ``--base-python`` on a venv of d6155bc; the
+2 cores shared with another engineer's 200-run campaign on one core, load about 3): bare stepping 8 x 10 s
+median 2.75 s; ``--methods hull``, 8 runs, 1 worker: the command 10.8 s (3.94x; base 28.6 s, 10.4x: 2.64x
+faster), the campaign 10.2 s (3.70x), its pool 9.8 s (3.57x), median run 1.00 s (simulation 0.52), overhead
+6.5 % (setup 0.11 s, report 0.25 s); ``--methods all``, 8 runs, 2 workers: 22.5 runs/min against the base's 12.2
+(1.85x), overhead 11.5 % (report 1.56 s); its runs took 4.06 s each (median; 36.2 s together, the two workers
+sharing about one free core), methods 1.79 s of it (zonotope 0.59, hull 0.41, ellipsoid 0.30, contractor 0.20, parallelotope 0.11). An
+earlier run the same hour (load 2-3): hull 4.51x (base 10.0x), overhead 8.6 %; all 1.89x, overhead 12.6 %.
 """
 
 from __future__ import annotations
