@@ -68,7 +68,7 @@ def plot_coverage(methods: dict, path) -> None:
     ax.set_ylim(-0.05, 1.05)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    ax.set_title("coverage against width (black bar: a statistical method's stated level)")
+    ax.set_title("coverage against width (black bar: a statistical method's stated level)", y=1.0)
     fig.subplots_adjust(left=0.8 / 8, right=1.0 - 0.2 / 8, bottom=0.6 / 5, top=1.0 - 0.4 / 5)  # inches (no tight_layout)
     fig.savefig(path, dpi=110)
     plt.close(fig)
