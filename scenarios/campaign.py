@@ -23,6 +23,7 @@ import concurrent.futures
 import ctypes
 import hashlib
 import importlib.metadata
+import importlib.util
 import json
 import multiprocessing
 import os
@@ -38,7 +39,7 @@ from h4bench.scenarios import plugins
 from h4bench.scenarios.rundir import prepare_folder, write_json
 from h4bench.scenarios.spec import ScenarioError
 from h4bench.scenarios.threads import single_blas_thread
-from h4bench.scenarios.timings import TimedJob, imported_packages
+from h4bench.scenarios.timings import TimedJob
 
 # spec keys that do not change what a run computes
 _NOT_INPUTS = {"name", "description", "quick", "quick_applied"}
@@ -69,17 +70,37 @@ def _sha256_bytes(data: bytes) -> str:
 _CODE_HASH: str | None = None
 
 
+def source_files() -> list[tuple[str, Path]]:
+    """The project's source files as ``(name, path)``: every ``*.py`` then every ``*.toml`` under each of
+    ``h4bench.SUBPACKAGES``' folders, found on disk (``importlib.util.find_spec``: no package is imported), named
+    by their path from the folder's parent (``sim/simulate.py``)."""
+    out = []
+    for pkg in h4bench.SUBPACKAGES:
+        spec = importlib.util.find_spec(f"h4bench.{pkg}")
+        if spec is None or not spec.submodule_search_locations:  # pragma: no cover - a broken installation
+            raise ImportError(f"h4bench.{pkg} is not installed")
+        for folder in spec.submodule_search_locations:
+            root = Path(folder)
+            for f in sorted(root.rglob("*.py")) + sorted(root.rglob("*.toml")):
+                out.append((str(f.relative_to(root.parent)), f))
+    return out
+
+
+def hash_files(files: list[tuple[str, Path]]) -> str:
+    """SHA-256 over ``(name, path)`` pairs: each name, then the file's bytes, in the order given."""
+    h = hashlib.sha256()
+    for name, path in files:
+        h.update(name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 def code_hash() -> str:
-    """SHA-256 over the source of the project's packages and models (computed once per process)."""
+    """SHA-256 over the source of the project's packages (:func:`source_files`), computed once per process
+    without importing them."""
     global _CODE_HASH
     if _CODE_HASH is None:
-        h = hashlib.sha256()
-        for pkg in h4bench.SUBPACKAGES:
-            root = Path(importlib.import_module(f"h4bench.{pkg}").__file__).parent
-            for f in sorted(root.rglob("*.py")) + sorted(root.rglob("*.toml")):
-                h.update(str(f.relative_to(root.parent)).encode())
-                h.update(f.read_bytes())
-        _CODE_HASH = h.hexdigest()
+        _CODE_HASH = hash_files(source_files())
     return _CODE_HASH
 
 
@@ -258,16 +279,32 @@ def check_same_campaign(out: Path, prov: dict,
             f"--out {str(out)!r} holds a campaign computed from other inputs: {'; '.join(diff)}. {hint}")
 
 
-def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = False) -> tuple[list[dict], dict]:
+def _import_quietly(modules: tuple[str, ...]) -> None:
+    """Import ``modules`` (a thread's target; a module that fails is imported again, and fails loudly, where it
+    is used)."""
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - only a head start: the user of the module reports the error
+            return
+
+
+def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = False,
+             report_imports: tuple[str, ...] = ()) -> tuple[list[dict], dict]:
     """Run ``job(spec, index, seed) -> dict`` for every index of ``spec['campaign']['runs']`` into ``out``,
     resuming what matches; returns (runs in index order, info with ``reused``, ``computed``, ``seconds``,
-    ``runs_per_minute``). ``job`` must be a picklable top-level function."""
+    ``runs_per_minute``). ``job`` must be a picklable top-level function.
+
+    report_imports : modules the kind's report will import after the runs (e.g. ``matplotlib.pyplot``, most of
+    a second): on a local pool they are imported by a thread of this process while it waits for the runs, once
+    every worker is started (a process pool forks all its workers at the first submission), so a fork never
+    copies a half-done import; the thread is joined before the runs are returned, so the report never meets a
+    half-done import either."""
     camp = spec["campaign"]
     started_wall, started = time.time(), time.perf_counter()
     n = camp["runs"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ScenarioError(f"campaign.runs must be an integer >= 1, got {n!r}")
-    imports = imported_packages()  # timed apart: code_hash imports them, and forked workers inherit them
     prov = provenance(spec, seed)
     out = prepare_folder(out, what={"scenario": spec["name"], "kind": spec["kind"]})
     saved_path = out / "campaign.json"
@@ -294,9 +331,10 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
     reused = len(runs)
     todo = [i for i in range(n) if i not in runs]
     progress(f"campaign (reused {reused})" if reused else "campaign", reused, n)
-    sections = {"imports": imports, "setup": time.perf_counter() - started - imports, "io": 0.0}
+    sections = {"setup": time.perf_counter() - started, "io": 0.0}
     started = time.perf_counter()
     errors: dict[int, str] = {}
+    importer = None
     if todo:
         children = _pool_children()  # the workers are the children started after this
         executor, client = _executor(camp)
@@ -307,6 +345,10 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                 plugins.ship_plugins(client, spec.get("estimators", {}).get("methods", []))
             with _TermAsInterrupt():
                 futures = {executor.submit(TimedJob(job), spec, i, seed): i for i in todo}
+                if client is None and report_imports and multiprocessing.get_start_method() == "fork":
+                    importer = threading.Thread(target=_import_quietly, args=(tuple(report_imports),),
+                                                daemon=True, name="report-imports")
+                    importer.start()
                 for fut in concurrent.futures.as_completed(futures):
                     i = futures[fut]
                     try:
@@ -337,6 +379,8 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
                 client.close()
             elif not interrupted:
                 executor.shutdown(wait=True, cancel_futures=True)
+    if importer is not None:
+        importer.join()  # done long ago unless the runs were quicker: the report never races a half-done import
     seconds = time.perf_counter() - started
     if errors:
         first = min(errors)

@@ -13,6 +13,8 @@ from typing import Optional
 
 import typer
 
+from h4bench.scenarios.exit_codes import EXIT_INCONSISTENT, EXIT_METHOD_FAILED
+
 app = typer.Typer(
     name="h4bench",
     help="Guaranteed identification of the H4 parallel robot's dynamic parameters: simulate, identify, check.",
@@ -237,7 +239,6 @@ def run(
     still written, the failures in the methods' entries); 130 interrupted.
     """
     from h4bench.scenarios.campaign import CampaignInterrupted
-    from h4bench.scenarios.identify import EXIT_METHOD_FAILED
     from h4bench.scenarios.runner import run_scenario
 
     _importable_from_cwd(methods)
@@ -379,7 +380,7 @@ def identify(
     4 some requested method failed (raised, exited, timed out, changed its inputs, returned no box; result.json
     still written, the failure in its entry).
     """
-    from h4bench.scenarios.identify import EXIT_INCONSISTENT, EXIT_METHOD_FAILED, METHODS, OptionError
+    from h4bench.scenarios.identify import METHODS, OptionError
     from h4bench.scenarios.judging import parse_methods
 
     _importable_from_cwd(method)

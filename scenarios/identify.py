@@ -30,12 +30,11 @@ from h4bench.ident.estimators import registry
 from h4bench.ident.processing.filtering import ProcessingSettings
 from h4bench.ident.robots.h4_equation import BLOCK_SAMPLES, build_equation
 from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
+from h4bench.scenarios.exit_codes import EXIT_INCONSISTENT, EXIT_METHOD_FAILED  # noqa: F401  (re-exported)
 from h4bench.scenarios.spec import DEFAULTS
 
 METHODS = tuple(dict.fromkeys((*registry.BUILTINS, "wls")))  # the built-in box estimators (any the registry resolves works) and WLS
 N_JOINTS = 4
-EXIT_INCONSISTENT = 3  # the data are proven inconsistent with the bound (InconsistentDataError)
-EXIT_METHOD_FAILED = 4  # some requested method gave no box and no proof of emptiness (result.json still written)
 
 
 def check_method(method) -> str:

@@ -7,43 +7,21 @@ with one. A run's results do not depend on the thread count (a quick ``enclosure
 bit for bit with one thread and with the default), but a trajectory design does: its SLSQP iterates follow the
 rounding of the threaded products, and a 3 s design with 1 and with 2 threads ends in different trajectories.
 So the design runs with the thread counts the process started with (:func:`original_blas_threads`), as it
-did before workers were limited; a design is then cached and shared (``trajectories.excitation``).
+did before workers were limited; a design is then cached and shared (``trajectories.excitation``), under a key
+that holds the thread counts it was computed with (:func:`h4bench.blas.blas_threads`): a design of other counts
+is never reused.
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
+
+from h4bench.blas import openblas_libraries
 
 __all__ = ["original_blas_threads", "single_blas_thread"]
 
-_SETTERS = ("openblas_set_num_threads", "openblas_set_num_threads64_", "scipy_openblas_set_num_threads64_",
-            "scipy_openblas_set_num_threads")
-_GETTERS = ("openblas_get_num_threads", "openblas_get_num_threads64_", "scipy_openblas_get_num_threads64_",
-            "scipy_openblas_get_num_threads")
 #: library path -> (setter, thread count found by :func:`single_blas_thread`)
 _ORIGINAL: dict = {}
-
-
-def _openblas_libraries() -> list:
-    """(path, setter, getter) of every OpenBLAS build loaded in this process (``/proc/self/maps``, Linux)."""
-    try:
-        with open("/proc/self/maps") as f:
-            paths = {line.split()[-1] for line in f if "openblas" in line.rsplit("/", 1)[-1].lower()}
-    except OSError:
-        return []
-    out = []
-    for path in sorted(paths):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        setter = next((getattr(lib, n) for n in _SETTERS if hasattr(lib, n)), None)
-        getter = next((getattr(lib, n) for n in _GETTERS if hasattr(lib, n)), None)
-        if setter is not None and getter is not None:
-            setter.argtypes, getter.restype = [ctypes.c_int], ctypes.c_int
-            out.append((path, setter, getter))
-    return out
 
 
 def single_blas_thread() -> list[str]:
@@ -54,7 +32,7 @@ def single_blas_thread() -> list[str]:
     import scipy.linalg  # noqa: F401
 
     done = []
-    for path, setter, getter in _openblas_libraries():
+    for path, setter, getter in openblas_libraries():
         _ORIGINAL.setdefault(path, (setter, int(getter())))
         setter(1)
         done.append(path)

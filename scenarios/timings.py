@@ -15,9 +15,9 @@ measured section to wall seconds; :data:`STAGES` groups them:
 ``run`` is the whole job as the worker saw it (:class:`TimedJob`); what the stages do not cover is ``other``
 (building the result dict, the worker's first imports, ...). The campaign's overhead is its wall time minus the
 runs' time divided by the workers: pool start-up, provenance, resumed runs' loading, the idle tail of the pool,
-summaries, plots and the report (everything but the final ``result.json`` write, which holds the figures). Its
-share is also given without the ``imports`` section: the parent importing the project's packages (numpy, scipy,
-MuJoCo, ...), which the provenance's code hash does anyway and which the forked workers then need not repeat.
+summaries, plots and the report (everything but the final ``result.json`` write, which holds the figures). The
+parent imports only what the kind's set-up and reports need (the code hash reads the source files without
+importing them): a worker imports the rest of what its runs use on its first run, inside that run's time.
 """
 
 from __future__ import annotations
@@ -45,20 +45,6 @@ class TimedJob:
         if isinstance(result, dict):
             result.setdefault("timings", {})["run"] = time.perf_counter() - started
         return result
-
-
-def imported_packages() -> float:
-    """Import the project's packages (``h4bench.SUBPACKAGES``: numpy, scipy, MuJoCo, toppra, ... behind them);
-    returns the seconds it took (0 when already imported). The campaign's provenance imports them anyway (its
-    code hash) and a forked worker inherits them, so the engine reports this part of its set-up apart."""
-    import importlib
-
-    import h4bench
-
-    t0 = time.perf_counter()
-    for pkg in h4bench.SUBPACKAGES:
-        importlib.import_module(f"h4bench.{pkg}")
-    return time.perf_counter() - t0
 
 
 def run_stages(timings: dict) -> dict:
@@ -108,8 +94,6 @@ def campaign_timings(runs: list[dict], computed: list[int], workers: int, starte
         "trajectory_sources": sources, "sections": {k: float(v) for k, v in sections.items()},
         "overhead": wall - busy if run_seconds and busy is not None else None,
         "overhead_share": (wall - busy) / wall if run_seconds and busy is not None and wall > 0 else None,
-        "overhead_share_without_imports": (wall - busy - float(sections.get("imports", 0.0))) / wall
-        if run_seconds and busy is not None and wall > 0 else None,
     }
 
 
@@ -123,9 +107,7 @@ def timing_lines(t: dict | None) -> list[str]:
              f"{n} run(s) computed on {t['workers']} worker(s) in {t['wall']:.4g} s of wall time; the runs took "
              f"{t['run_seconds']['total']:.4g} s together (median {t['run_seconds']['median']:.3g} s per run); "
              + (f"overhead outside the runs (wall - run time / workers): {t['overhead']:.3g} s "
-                f"({100 * t['overhead_share']:.1f} % of the wall time; "
-                f"{100 * t['overhead_share_without_imports']:.1f} % without importing the packages the forked "
-                "workers inherit)." if t.get("overhead") is not None
+                f"({100 * t['overhead_share']:.1f} % of the wall time)." if t.get("overhead") is not None
                 else "overhead not measured (Dask cluster)."), "",
              "| stage | total [s] | median per run [s] | share |", "|---|---:|---:|---:|"]
     lines += [f"| {s} | {v['total']:.4g} | {v['median']:.3g} | {100 * v['total'] / total:.1f} % |"

@@ -270,3 +270,12 @@ def test_the_shared_checks_sit_below_every_layer():
     imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
     assert imported <= {"__future__", "numpy"}, imported
+
+
+def test_the_blas_probe_sits_below_every_layer():
+    """``h4bench.blas`` is read by the design caches of sim and trajectories and by scenarios.threads: the
+    standard library only."""
+    tree = ast.parse((ROOT / "h4bench" / "blas.py").read_text())
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+    assert imported <= {"__future__", "ctypes", "os", "pathlib"}, imported

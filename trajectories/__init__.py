@@ -7,7 +7,6 @@ from h4bench.trajectories.checks import CHECKS, check_trajectory
 from h4bench.trajectories.excitation import cache_dir, design_excitation
 from h4bench.trajectories.fourier import fourier_excitation, fourier_trajectory
 from h4bench.trajectories.limits import NOMINAL_PARAMETERS, InfeasibleTrajectoryError, Limits, nominal_parameters
-from h4bench.trajectories.timing import TOPPRA_VERSION, slow_down, waypoint_trajectory
 from h4bench.trajectories.trajectory import Trajectory
 
 __all__ = [
@@ -16,3 +15,15 @@ __all__ = [
     "check_trajectory", "fourier_excitation", "fourier_trajectory", "nominal_parameters", "slow_down",
     "waypoint_trajectory",
 ]
+
+_TIMING = ("TOPPRA_VERSION", "slow_down", "waypoint_trajectory")  # in trajectories.timing, which imports toppra
+
+
+def __getattr__(name: str):
+    """The toppra-timed names, imported on first use (:mod:`trajectories.timing` imports toppra, about a second;
+    a campaign run that recalls its designed trajectory never needs it)."""
+    if name in _TIMING:
+        from h4bench.trajectories import timing
+
+        return getattr(timing, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -5,8 +5,9 @@ Cache. A design takes seconds to tens of seconds; campaigns and reruns ask for t
 ``$H4BENCH_CACHE/trajectories`` if the environment variable ``H4BENCH_CACHE`` is set, else in
 ``$XDG_CACHE_HOME/h4bench/trajectories`` (default ``~/.cache/h4bench/trajectories``). The key is the SHA-256 of
 every input that changes the result: the geometry's arrays, the limits, seed, duration, criterion, processing
-settings, targets, nominal parameters, the remaining design options and the source code of the design modules
-(:data:`CODE_FILES`, so an edit invalidates old entries). Files are written atomically (temp file +
+settings, targets, nominal parameters, the remaining design options, the source code of the design modules
+(:data:`CODE_FILES`, so an edit invalidates old entries) and the BLAS thread counts the design runs under (its
+SLSQP iterates follow the threaded products' rounding: :func:`h4bench.blas.blas_threads`). Files are written atomically (temp file +
 ``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
 and inputs, and either holds exactly the arrays that passed :func:`trajectories.check_trajectory` when it was
 designed (their SHA-256 and the check report's, stored with the entry, :func:`content_hash`: the key already
@@ -33,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from h4bench import ident
+from h4bench.blas import blas_threads
 from h4bench import sim
 from h4bench.trajectories.bounded import as_targets
 from h4bench.trajectories.checks import check_trajectory
@@ -87,9 +89,13 @@ def geometry_hash(geometry) -> str:
 
 
 def cache_inputs(geometry, duration, seed, limits, criterion, processing, targets, theta_nominal, options) -> dict:
-    """The JSON-ready inputs that identify a design (what the key hashes)."""
+    """The JSON-ready inputs that identify a design (what the key hashes), with the BLAS thread counts in effect
+    (:func:`h4bench.blas.blas_threads`: the optimiser's iterates follow the threaded products' rounding)."""
+    import scipy.linalg  # noqa: F401  (scipy's BLAS loaded, as the design will: its thread count is in the key)
+
     return {
-        "geometry": geometry_hash(geometry), "code": _code_hash(), "duration": float(duration), "seed": int(seed),
+        "geometry": geometry_hash(geometry), "code": _code_hash(), "blas": blas_threads(),
+        "duration": float(duration), "seed": int(seed),
         "limits": limits.to_dict(), "criterion": criterion, "processing": asdict(processing),
         "targets": None if targets is None else [float(v) for v in targets],
         "theta_nominal": [float(v) for v in theta_nominal], "options": options,

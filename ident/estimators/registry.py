@@ -100,6 +100,10 @@ class _Builtins(Mapping):
                                                   "built-in")
         return self._resolved[name]
 
+    def __contains__(self, name) -> bool:
+        """Whether ``name`` is a built-in, without importing its module (``Mapping``'s default would look it up)."""
+        return name in self._specs
+
     def __iter__(self):
         return iter(self._specs)
 

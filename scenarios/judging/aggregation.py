@@ -10,13 +10,17 @@ __all__ = ["clopper_pearson", "summarise_methods"]
 
 def clopper_pearson(k: int, n: int, alpha: float = 0.05) -> tuple[float, float]:
     """Exact (Clopper-Pearson) two-sided ``1 - alpha`` interval of a binomial proportion ``k / n``:
-    ``beta.ppf(alpha/2, k, n-k+1)``, ``beta.ppf(1-alpha/2, k+1, n-k)``, with 0 and 1 at the ends."""
-    from scipy.stats import beta
+    ``beta.ppf(alpha/2, k, n-k+1)``, ``beta.ppf(1-alpha/2, k+1, n-k)``, with 0 and 1 at the ends.
+
+    The quantiles are the inverse regularised incomplete beta function (``scipy.special.betaincinv``, what
+    ``scipy.stats.beta.ppf`` evaluates: the same values bit for bit, tested) without importing ``scipy.stats``
+    (about a second of a campaign's report)."""
+    from scipy.special import betaincinv
 
     if n <= 0:
         return (0.0, 1.0)
-    lo = 0.0 if k == 0 else float(beta.ppf(alpha / 2, k, n - k + 1))
-    hi = 1.0 if k == n else float(beta.ppf(1 - alpha / 2, k + 1, n - k))
+    lo = 0.0 if k == 0 else float(betaincinv(k, n - k + 1, alpha / 2))
+    hi = 1.0 if k == n else float(betaincinv(k + 1, n - k, 1 - alpha / 2))
     return (lo, hi)
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 from h4bench.scenarios import report
 from h4bench.scenarios.campaign import check_same_campaign, provenance, run_many
 from h4bench.scenarios.campaign_build import campaign_experiment
-from h4bench.scenarios.campaign_report import summarise, write_outputs
+from h4bench.scenarios.campaign_report import REPORT_IMPORTS, summarise, write_outputs
 from h4bench.scenarios.rundir import OwnedFolder, save_run_files, write_json
 from h4bench.scenarios.spec import ScenarioError
 
@@ -60,7 +60,7 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
             result = replay_one(spec, only, seed, tmp, progress)
             write_json(tmp / "result.json", result)
         return result
-    runs, info = run_many(spec, seed, out, campaign_job, progress, fresh=fresh)
+    runs, info = run_many(spec, seed, out, campaign_job, progress, fresh=fresh, report_imports=REPORT_IMPORTS)
     result = summarise(spec, seed, runs, info)
     if spec["certified"]["enabled"]:
         certs = [r["certificate"] for r in runs]

@@ -18,7 +18,7 @@ import numpy as np
 from h4bench.ident.estimators.residuals import residual_bound
 from h4bench.scenarios.campaign import run_many
 from h4bench.scenarios.campaign_build import campaign_experiment
-from h4bench.scenarios.campaign_report import summarise, write_outputs
+from h4bench.scenarios.campaign_report import REPORT_IMPORTS, summarise, write_outputs
 from h4bench.scenarios.experiment import estimate_boxes
 from h4bench.scenarios.spec import ScenarioError
 
@@ -42,7 +42,8 @@ def critical_job(spec: dict, index: int, base_seed: int) -> dict:
 def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fresh: bool = False) -> dict:
     if only is not None:
         raise ScenarioError("only is not available for enclosure-critical (rerun the ordinary campaign's index)")
-    runs, info = run_many(spec, seed, out, critical_job, progress, fresh=fresh)
+    runs, info = run_many(spec, seed, out, critical_job, progress, fresh=fresh,
+                           report_imports=REPORT_IMPORTS)
     result = summarise(spec, seed, runs, info)
     result["bound"] = "critical (per row: its own oracle residual, rounded outward)"
     result["critical_bound_median"] = float(np.median([r["critical_bound_median"] for r in runs]))

@@ -169,6 +169,13 @@ def test_clopper_pearson_is_scipys_exact_interval():
     for k, n in [(0, 4), (4, 4), (3, 4), (190, 200), (200, 200), (0, 200), (57, 100)]:
         ci = stats.binomtest(k, n).proportion_ci(0.95, method="exact")
         assert np.allclose(judging.clopper_pearson(k, n), (ci.low, ci.high), rtol=1e-9, atol=1e-12), (k, n)
+    # bit for bit what scipy.stats.beta.ppf gives (the summaries' numbers did not change with the lighter import)
+    for n in (1, 2, 7, 200, 3001):
+        for k in sorted({0, 1, n // 3, n - 1, n}):
+            for alpha in (0.05, 0.01):
+                lo = 0.0 if k == 0 else float(stats.beta.ppf(alpha / 2, k, n - k + 1))
+                hi = 1.0 if k == n else float(stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
+                assert judging.clopper_pearson(k, n, alpha) == (lo, hi), (k, n, alpha)
 
 
 def test_parse_methods():

@@ -117,3 +117,57 @@ def test_critical_bounds_keep_the_truth(f):
         W, y, b, theta = oracles.critical_case(rng, 2 + seed % 3, 40)
         box = f(W, y, b, Box(theta - 0.05, theta + 0.05))
         assert box.contains(theta).all(), seed
+
+
+def _row_by_row(monkeypatch, f, *args):
+    """``f`` with every row visited (the batched skip test answering False: the plain sequential loop)."""
+    from h4bench.ident.estimators import zonotope as zmod
+
+    with monkeypatch.context() as m:
+        m.setattr(zmod, "_parallelotope_skips", lambda Wb, *a: np.zeros(len(Wb), dtype=bool))
+        return f(*args)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_parallelotope_skipping_rows_in_blocks_is_the_row_by_row_result_bit_for_bit(seed, monkeypatch):
+    # the oracle is the same estimator visiting every row; scales from 1e-3 to 1e3 and critical bounds (the truth
+    # on every strip's edge: rows at the margin of the skip test)
+    rng = np.random.default_rng(100 + seed)
+    if seed % 2:
+        W, y, b, theta = oracles.critical_case(rng, 3 + seed % 4, 3000)
+        prior = Box(theta - 0.05, theta + 0.05)
+    else:
+        W, y, b, prior, _ = oracles.problem(rng, 4 + seed, 3000, noise=0.01)
+        s = 10.0 ** rng.uniform(-3, 3, W.shape[1])  # W theta = (W s)(theta / s): the same problem rescaled
+        W, prior = W * s, Box(prior.lower / s, prior.upper / s)
+    fast = parallelotope(W, y, b, prior)
+    slow = _row_by_row(monkeypatch, parallelotope, W, y, b, prior)
+    assert np.array_equal(fast.lower, slow.lower) and np.array_equal(fast.upper, slow.upper)
+    assert fast.info["cuts"] == slow.info["cuts"] and fast.info["set"] == slow.info["set"]
+    assert fast.info["cuts"] < len(W)  # rows were skipped, some of them in blocks
+
+
+def test_the_row_scan_visits_exactly_the_rows_its_test_cannot_skip():
+    from h4bench.ident.estimators._common import RowScan
+
+    rng = np.random.default_rng(5)
+    N = 1000
+    hard = rng.uniform(size=N) < 0.05  # rows a test never skips; every third of them "changes the set"
+    tested = []
+
+    def test(k, end):
+        tested.append((k, end))
+        return ~hard[k:end]
+
+    scan = RowScan(N, test, first=4, largest=64)
+    visited = []
+    for k in scan:
+        visited.append(k)
+        if len(visited) % 3 == 0:
+            scan.changed = True
+    assert visited == list(np.flatnonzero(hard))
+    assert tested[0] == (0, 4) and max(e - k for k, e in tested) == 64 and tested[-1][1] == N
+    # after a changed row the next test starts right after it
+    changed_rows = visited[2::3]
+    starts = {k for k, _ in tested}
+    assert all(r + 1 in starts for r in changed_rows if r + 1 < N)
