@@ -223,7 +223,8 @@ def run(
     only: Optional[int] = typer.Option(None, help="campaigns: re-run this run index alone, with its replay"),
     fresh: bool = typer.Option(False, "--fresh", help="campaigns: recompute every run instead of resuming"),
     methods: Optional[str] = typer.Option(None, help="estimators a,b,c (names, package.module:attribute, or all: "
-                                          "every registered one; h4bench estimators lists them), replacing the "
+                                          "every registered one but certified, which --error-model derived adds; h4bench estimators lists "
+                                          "them), replacing the "
                                           "spec's [estimators] methods"),
     runs: Optional[int] = typer.Option(None, help="campaigns: the number of runs (replaces campaign.runs)"),
     method_timeout: Optional[float] = typer.Option(None, help="seconds each estimator may run per run (default: no "

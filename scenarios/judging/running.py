@@ -82,7 +82,8 @@ def run_methods(methods, W, y, bound, prior, context: dict | None = None,
 def parse_methods(text) -> list[str]:
     """The method list of ``--methods a,b,c``: names (a built-in, an entry point of group ``h4bench.estimators``)
     or ``package.module:attribute``; ``all`` = every registered one (the built-ins and every entry point, those
-    that fail to load included, so that each run reports them as failed). Duplicates are dropped. No entry point
+    that fail to load included, so that each run reports them as failed) except the built-ins that need the
+    derived interval regressor (``certified``: a derived error model adds it with what it needs). Duplicates are dropped. No entry point
     is loaded here; a ``module:attribute`` is resolved in a child process
     (:func:`ident.estimators.isolation.resolve`: its import code never runs in this process).
 
@@ -98,8 +99,9 @@ def parse_methods(text) -> list[str]:
     known = [*registry.BUILTINS, *usable, *(n for n, _ in problems if n not in registry.BUILTINS)]
     out = []
     for item in items:
-        if item == "all":
-            out += known
+        if item == "all":  # the built-ins that need the derived interval regressor run only with it (certify)
+            out += [n for n in known if not (n in registry.BUILTINS and any(
+                registry.takes(n, k) for k in registry.DECLARED_ONLY_CONTEXT))]
         elif item in known:
             out.append(item)
         elif ":" in item:
