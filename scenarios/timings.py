@@ -10,6 +10,7 @@ measured section to wall seconds; :data:`STAGES` groups them:
 - ``methods``: every estimator and the minimum consistent bound (``timings["methods"]``, one entry per name);
 - ``judging``: the per-method verdicts against the truth and the hull (``judging``);
 - ``analysis``: the error budget (``budget``) and the width analysis (``methods["width_analysis"]`` when run);
+- ``certified``: with a derived error model, the certified equation, its box and its certificate (``certified``);
 - ``io``: writing the run's file (``io``, measured by the campaign engine in the parent process).
 
 ``run`` is the whole job as the worker saw it (:class:`TimedJob`); what the stages do not cover is ``other``
@@ -27,7 +28,7 @@ import time
 
 __all__ = ["STAGES", "TimedJob", "campaign_timings", "run_stages", "timing_lines"]
 
-STAGES = ("design", "simulation", "processing", "methods", "judging", "analysis", "io", "other")
+STAGES = ("design", "simulation", "processing", "methods", "judging", "analysis", "certified", "io", "other")
 _DESIGN = ("model", "trajectory", "controller")
 _ANALYSIS_METHODS = ("width_analysis",)
 
@@ -58,6 +59,7 @@ def run_stages(timings: dict) -> dict:
         "methods": sum(float(v) for k, v in methods.items() if k not in _ANALYSIS_METHODS),
         "judging": float(timings.get("judging", 0.0)),
         "analysis": float(timings.get("budget", 0.0)) + sum(float(methods.get(k, 0.0)) for k in _ANALYSIS_METHODS),
+        "certified": float(timings.get("certified", 0.0)),
         "io": float(timings.get("io", 0.0)),
     }
     run = timings.get("run")

@@ -5,6 +5,7 @@ parameters: is the truth always enclosed? Runs on a local process pool or a Dask
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 from h4bench.scenarios import report
@@ -27,7 +28,9 @@ def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
     if spec["certified"]["enabled"]:  # --error-model derived: the certified box and its certificate beside
         from h4bench.scenarios.certificate import certify
 
+        started = time.perf_counter()
         extra = certify(run_, spec)
+        result.setdefault("timings", {})["certified"] = time.perf_counter() - started
         result["methods"]["certified"] = extra.pop("certified_entry")
         result.update(extra)
     return result
