@@ -103,6 +103,12 @@ class MR:
     def __getitem__(self, key) -> MR:
         return MR(self.c[key], self.r[key], None if self.a is None else self.a[key])
 
+    def untied(self) -> MR:
+        """The same enclosure without the tau-dependence: its range over every tau, ``c +- (|a| + r)``."""
+        if self.a is None:
+            return self
+        return MR(self.c, (np.abs(self.a) + self.r) * _ONE + _TINY)
+
     def swap(self) -> MR:
         """The transpose of the last two axes."""
         return MR(np.swapaxes(self.c, -1, -2), np.swapaxes(self.r, -1, -2),
@@ -429,7 +435,9 @@ def jet_inverse(m: Jet, centre=None, rounds: int = 2) -> Jet:
     if centre is not None:
         y0, dz = centre
         for _ in range(rounds):
-            y = _tighter(y, y0 + ein("...ilY,...Y->...il", g, dz))
+            # mean value: Y(z) = Y0 + Y_z(xi) (z - z0), xi between z0 and z (on another slice of tau than z for a
+            # Taylor model: Y_z enters with its range over every tau, z - z0 with its own tau)
+            y = _tighter(y, y0 + ein("...ilY,...Y->...il", g.untied(), dz))
             t, g = grad(y)
     if m.h is None:
         return Jet(y, g)

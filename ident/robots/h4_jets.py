@@ -146,8 +146,8 @@ def _x_jet(geometry, Q: MR, X: MR, order: int, x_hat=None, centred: int = 0) -> 
         q_hat = MR(Q.c)
         J_hat = _x_jet(geometry, q_hat, pose_box(geometry, q_hat, x_hat), 1).g
         dQ = MR(np.zeros_like(Q.c), Q.r, Q.a)  # Q - q^
-        for _ in range(centred):
-            g = narrower(g, J_hat + ein("...ijk,...k->...ij", xqq, dQ))
+        for _ in range(centred):  # mean value: x_qq at a point between q^ and q, over every tau (untied)
+            g = narrower(g, J_hat + ein("...ijk,...k->...ij", xqq.untied(), dQ))
             xqq = narrower(xqq, hessian(g))
     return Jet(X, g, xqq)
 
