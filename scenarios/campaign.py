@@ -230,23 +230,32 @@ def _stop_executor(executor, known_children: set[int]) -> None:
 
 
 class _TermAsInterrupt:
-    """SIGTERM raises KeyboardInterrupt in the main thread while a campaign runs (same clean stop as Ctrl-C); the
-    previous handler is restored on exit. A handler that was not installed from Python (``getsignal`` gives None)
-    cannot be restored, so it is then left in place (SIGTERM keeps its own behaviour)."""
+    """A stop signal while a campaign runs. With ``event`` (the engine's loop), SIGINT and SIGTERM only set it: the
+    loop polls it between waits and stops at a safe point, so no exception is ever raised inside
+    ``concurrent.futures``' own lock handling (a KeyboardInterrupt there can leave a future's lock held and hang
+    the pool's shutdown). Without ``event``, SIGTERM raises KeyboardInterrupt in the main thread (the same stop as
+    Ctrl-C). The previous handlers are restored on exit; a handler that was not installed from Python
+    (``getsignal`` gives None) cannot be restored, so it is then left in place."""
+
+    def __init__(self, event: threading.Event | None = None):
+        self.event = event
 
     def __enter__(self):
-        self.previous = None
-        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) is not None:
-            self.previous = signal.signal(signal.SIGTERM, self._raise)
+        self.previous = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM) if self.event is not None else (signal.SIGTERM,):
+                if signal.getsignal(sig) is not None:
+                    self.previous[sig] = signal.signal(sig, self._handle)
         return self
 
-    @staticmethod
-    def _raise(signum, frame):
-        raise KeyboardInterrupt
+    def _handle(self, signum, frame):
+        if self.event is None:
+            raise KeyboardInterrupt
+        self.event.set()
 
     def __exit__(self, *exc):
-        if self.previous is not None:
-            signal.signal(signal.SIGTERM, self.previous)
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
 
 
 # ------------------------------------------------------------------------------------------------ the engine
@@ -343,27 +352,35 @@ def run_many(spec: dict, seed: int, out: Path, job, progress, fresh: bool = Fals
         try:
             if client is not None:
                 plugins.ship_plugins(client, spec.get("estimators", {}).get("methods", []))
-            with _TermAsInterrupt():
+            stop = threading.Event()
+            with _TermAsInterrupt(stop):
                 futures = {executor.submit(TimedJob(job), spec, i, seed): i for i in todo}
                 if client is None and report_imports and multiprocessing.get_start_method() == "fork":
                     importer = threading.Thread(target=_import_quietly, args=(tuple(report_imports),),
                                                 daemon=True, name="report-imports")
                     importer.start()
-                for fut in concurrent.futures.as_completed(futures):
-                    i = futures[fut]
-                    try:
-                        result = fut.result()
-                    except Exception as exc:  # noqa: BLE001 - a run that crashed is reported, not hidden
-                        errors[i] = f"{type(exc).__name__}: {exc}"
-                        continue
-                    result["provenance"] = prov
-                    t_io = time.perf_counter()
-                    write_json(run_path(out, i), result)
-                    t_io = time.perf_counter() - t_io
-                    sections["io"] += t_io
-                    result.setdefault("timings", {})["io"] = t_io  # in memory: the file cannot hold its own time
-                    runs[i] = result
-                    progress(f"campaign (reused {reused})" if reused else "campaign", len(runs) + len(errors), n)
+                pending = set(futures)
+                while pending:
+                    if stop.is_set():  # a stop signal: raised here, at a safe point of this loop
+                        raise KeyboardInterrupt
+                    done, pending = concurrent.futures.wait(pending, timeout=0.2,
+                                                            return_when=concurrent.futures.FIRST_COMPLETED)
+                    for fut in sorted(done, key=futures.get):
+                        i = futures[fut]
+                        try:
+                            result = fut.result()
+                        except Exception as exc:  # noqa: BLE001 - a run that crashed is reported, not hidden
+                            errors[i] = f"{type(exc).__name__}: {exc}"
+                            continue
+                        result["provenance"] = prov
+                        t_io = time.perf_counter()
+                        write_json(run_path(out, i), result)
+                        t_io = time.perf_counter() - t_io
+                        sections["io"] += t_io
+                        # in memory: the file cannot hold its own time
+                        result.setdefault("timings", {})["io"] = t_io
+                        runs[i] = result
+                        progress(f"campaign (reused {reused})" if reused else "campaign", len(runs) + len(errors), n)
         except KeyboardInterrupt:
             interrupted = True
             if client is None:

@@ -357,7 +357,8 @@ class Jet:
         g = self.g * c[..., None]
         if self.h is None:
             return Jet(s, g)
-        return Jet(s, g, self.h * c[..., None, None] - (self.g[..., :, None] * self.g[..., None, :]) * s[..., None, None])
+        gg = self.g[..., :, None] * self.g[..., None, :]
+        return Jet(s, g, self.h * c[..., None, None] - gg * s[..., None, None])
 
     def cos(self) -> Jet:
         c = self.v.cos()
@@ -367,7 +368,8 @@ class Jet:
         g = -(self.g * s[..., None])
         if self.h is None:
             return Jet(c, g)
-        return Jet(c, g, -(self.h * s[..., None, None]) - (self.g[..., :, None] * self.g[..., None, :]) * c[..., None, None])
+        gg = self.g[..., :, None] * self.g[..., None, :]
+        return Jet(c, g, -(self.h * s[..., None, None]) - gg * c[..., None, None])
 
     @staticmethod
     def stack(jets: list, axis: int = -1) -> Jet:

@@ -213,9 +213,10 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     of value shape (S, n_out, nc) in the 2 n_j variables (q, qd): rigorous enclosures of the values and the
     gradients at the measured secant states (e.g. :func:`ident.robots.h4_jets.nacelle_jets`).
     q, e : (n, n_j) measured positions and their error bounds [rad]; qd_max, qdd_max (n_j,) stated motion bounds;
-    curvature : (MP, MF), each (n_out, nc, 2 n_j, 2 n_j) or per step (S, n_out, nc, 2 n_j, 2 n_j), bounds of ``|d^2 P / dx_a dx_b|``, ``|d^2 F / ...|`` over
-    ``x = (q, qd)`` over each step's motion (see :func:`ident.robots.h4_certified.curvature_bounds`: sampled, NOT
-    proven): used by the truncation's second-order remainder.
+    curvature : (MP, MF), each (n_out, nc, 2 n_j, 2 n_j) or per step (S, n_out, nc, 2 n_j, 2 n_j): bounds of
+    ``|d^2 P / dx_a dx_b|``, ``|d^2 F / ...|`` over ``x = (q, qd)`` over each step's motion (the H4's: interval jets
+    over each step's motion tube, :func:`ident.robots.h4_jets.box_jets`, or the sampled fallback): used by the
+    truncation's second-order remainder.
     encoder : (MP, MF, GP, GF) per step, or None (then ``curvature`` serves here too): bounds over each step's
     ENCODER box (the measured secant state +- the position error's effect ``(e_m, e_v)``) of the second
     derivatives (S, n_out, nc, 2 n_j, 2 n_j) and of the gradients (S, n_out, nc, 2 n_j) of P and F, e.g. the
