@@ -245,6 +245,15 @@ def test_the_campaign_restores_the_process_hooks_it_replaces():
         with camp._TermAsInterrupt():
             assert signal.getsignal(signal.SIGTERM) is not mine
         assert signal.getsignal(signal.SIGTERM) is mine
+        # the engine's form: both signals only set the event (no exception inside concurrent.futures), restored after
+        stop, sigint = threading.Event(), signal.getsignal(signal.SIGINT)
+        with camp._TermAsInterrupt(stop):
+            os.kill(os.getpid(), signal.SIGINT)
+            deadline = time.monotonic() + 5
+            while not stop.is_set() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert stop.is_set()
+        assert signal.getsignal(signal.SIGTERM) is mine and signal.getsignal(signal.SIGINT) is sigint
     finally:
         signal.signal(signal.SIGTERM, old)
     hook = threading.excepthook
