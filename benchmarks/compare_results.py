@@ -11,7 +11,8 @@ Keep DIR outside the repository; run it on the base commit first, then on the ch
 ``compare`` loads ``NAME/result.json`` of both folders (and with ``--runs`` a campaign's ``runs/*.json`` too) and
 compares them as parsed JSON: floats with ``==`` (bit for bit, NaN written as null on both sides), lists
 element by element, dicts key by key. Ignored wherever they appear: the keys in :data:`IGNORED` (timings,
-throughput, provenance hashes, paths) and every key ending in ``seconds``. Prints every difference (a JSON path, before, after)
+throughput, provenance hashes, paths) and every key ending in ``seconds``; the model path (:data:`CHECKOUT_PATHS`) is
+compared inside its checkout (``models/h4.xml``). Prints every difference (a JSON path, before, after)
 and the keys present on one side only; exit code 0 when nothing differs, 1 otherwise.
 """
 
@@ -29,6 +30,15 @@ IGNORED = frozenset({
     "timings", "seconds", "wall_seconds", "runs_per_minute", "provenance", "code_hash", "spec_hash",
     "model_hash", "version", "versions", "out", "path", "folder", "replay", "stage_seconds", "campaign_timings",
 })
+
+
+#: Keys whose values are files of the checkout (the model): compared by their path inside it (``models/h4.xml``),
+#: so that two checkouts of the same code compare equal while another model file still shows.
+CHECKOUT_PATHS = frozenset({"model"})
+
+
+def _in_checkout(path: str) -> str:
+    return "/".join(Path(path).parts[-2:])
 
 
 def scenarios() -> list[str]:
@@ -65,6 +75,9 @@ def differences(a, b, where: str = "") -> list[str]:
                 continue
             if k not in a or k not in b:
                 out.append(f"{where}/{k}: only {'after' if k not in a else 'before'}")
+                continue
+            if k in CHECKOUT_PATHS and isinstance(a[k], str) and isinstance(b[k], str):
+                out += differences(_in_checkout(a[k]), _in_checkout(b[k]), f"{where}/{k}")
                 continue
             out += differences(a[k], b[k], f"{where}/{k}")
         return out
