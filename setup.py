@@ -8,7 +8,9 @@ The folders are named once, in ``h4bench/__init__.py``; their sub-packages are f
 import ast
 from pathlib import Path
 
-from setuptools import find_packages, setup
+import sys
+
+from setuptools import Extension, find_packages, setup
 
 ROOT = Path(__file__).resolve().parent
 
@@ -26,4 +28,9 @@ for folder in LAYOUT["SUBPACKAGES"] + LAYOUT["DATA_PACKAGES"]:
     package_dir[f"h4bench.{folder}"] = folder
     packages += [f"h4bench.{folder}"] + [f"h4bench.{folder}.{sub}" for sub in find_packages(folder)]
 
-setup(packages=packages, package_dir=package_dir)
+# the simulator's sample loop in compiled code (sim/_loop.cpp; sim/compiled.py): optional, since the Python loop
+# gives the same bits; no fused multiply-add, so that it does
+FLAGS = ["/O2", "/fp:strict"] if sys.platform == "win32" else ["-O2", "-std=c++17", "-ffp-contract=off"]
+LOOP = Extension("h4bench.sim._loop", ["sim/_loop.cpp"], language="c++", extra_compile_args=FLAGS, optional=True)
+
+setup(packages=packages, package_dir=package_dir, ext_modules=[LOOP])

@@ -228,9 +228,17 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
         at = _array_at(stream.at)
     append_cmd, append_qm = rec_cmd.append, rec_qm.append
     wall = time.perf_counter()
+    compiled = False
     try:
-        _loop(n, qpos, qvel, qacc, qm, law.step_list, ctrl, at, mujoco.mj_forward, model, data, rec_qpos, rec_qvel,
-              rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
+        if isinstance(law, _FloatLaw):  # the same loop in compiled code when it is built and applies
+            from h4bench.sim.compiled import compiled_loop  # noqa: PLC0415
+
+            cmd_arr, qm_arr = np.empty((n, N_JOINTS)), np.empty((n, N_JOINTS))
+            compiled = compiled_loop(law, stream, model, data, qm, n, substeps, efc_pos,
+                                     (rec_qpos, rec_qvel, rec_qacc, rec_app, efc, cmd_arr, qm_arr), progress)
+        if not compiled:
+            _loop(n, qpos, qvel, qacc, qm, law.step_list, ctrl, at, mujoco.mj_forward, model, data, rec_qpos,
+                  rec_qvel, rec_qacc, rec_app, act, efc, efc_pos, ne, append_cmd, append_qm, advance, progress)
     except ValueError as exc:  # e.g. rounding a NaN angle: the state diverged
         if np.all(np.isfinite(qpos)):
             raise
@@ -238,7 +246,10 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
                               "reference and the controller") from exc
     wall = time.perf_counter() - wall
     law.finish()
-    rec_cmd, rec_qm = np.array(rec_cmd, dtype=float), np.array(rec_qm, dtype=float)
+    if compiled:
+        rec_cmd, rec_qm = cmd_arr, qm_arr
+    else:
+        rec_cmd, rec_qm = np.array(rec_cmd, dtype=float), np.array(rec_qm, dtype=float)
     if not np.all(np.isfinite(rec_qpos)):
         raise SimulationError("the simulation diverged (non-finite state); check the reference and the controller")
     violation = np.abs(efc).max(axis=1)

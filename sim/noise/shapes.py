@@ -123,6 +123,14 @@ class PrecomputedTorqueError:
             self._rows = self.e.tolist()
         return self._rows[k]
 
+    def compiled_terms(self) -> dict | None:
+        """What the compiled sample loop (:mod:`sim.compiled`) needs to compute :meth:`at_list` itself: the
+        precomputed rows, no ripple, no gain error, no finiteness check (None for a subclass with its own
+        ``at_list``)."""
+        if type(self).at_list is not PrecomputedTorqueError.at_list:
+            return None
+        return {"pre": self.e, "ripple": np.empty((0, 6)), "gain": np.empty((0, 5)), "check_finite": False}
+
     def measured(self, tau_cmd: np.ndarray) -> np.ndarray:
         """The logged torques (n, 4) [N m]: a copy of the commands."""
         return np.array(tau_cmd, dtype=float)

@@ -122,6 +122,16 @@ class ErrorStream:
             raise NoiseModelError(f"q must be finite (the error at sample {k} is not), got {q!r}")
         return e0, e1, e2, e3
 
+    def compiled_terms(self) -> dict | None:
+        """What the compiled sample loop (:mod:`sim.compiled`) needs to compute :meth:`at_list` itself, in its
+        order: the precomputed rows (n, 4), the ripple harmonics (order, amplitude, phase_0..3) (h, 6), the gain
+        errors (g_0..3, torque limit) (g, 5), and the finiteness check of the sum. None for a subclass with its
+        own ``at_list``."""
+        if type(self).at_list is not ErrorStream.at_list:
+            return None
+        return {"pre": self.state_independent, "ripple": np.array(self._ripple, dtype=float).reshape(-1, 6),
+                "gain": np.array(self._gain, dtype=float).reshape(-1, 5), "check_finite": True}
+
     def measured(self, tau_cmd) -> np.ndarray:
         """The torque the robot logs (n, 4) [N m] given all commanded torques tau_cmd (n, 4): the command
         itself, or its quantisation ``round(tau_cmd / lsb) lsb``."""
