@@ -145,26 +145,46 @@ _FEEDFORWARD: dict = {}
 FEEDFORWARD_CACHE_SIZE = 16
 
 
+def _feedforward_code() -> bytes:
+    """The source of the inverse dynamics (regressor, kinematics, geometry) and numpy's version: in the key."""
+    import importlib
+
+    out = [np.__version__.encode()]
+    for name in ("h4bench.ident.robots.h4", "h4bench.sim.kinematics", "h4bench.sim.model"):
+        out.append(Path(importlib.import_module(name).__file__).read_bytes())
+    return b"\0".join(out)
+
+
 def feedforward(geometry, theta, reference) -> np.ndarray:
     """The feed-forward torque (n, 4) [N m]: ``ident.inverse_dynamics`` of the reference with the nominal
-    parameters ``theta``, kept per process by its inputs (the geometry, theta and the reference's q, qd, qdd, bit
-    for bit: a campaign's runs share a few trajectories). Read-only."""
+    parameters ``theta``, kept by its inputs (the geometry, theta and the reference's q, qd, qdd, bit for bit,
+    with the inverse dynamics' source, numpy's version and the BLAS thread counts) per process and in the design
+    cache on disk (``sim.design_cache``, folder ``feedforward``): a campaign's runs share a few trajectories, and
+    its workers and the next campaign find them there. Read-only."""
     import hashlib
 
+    from h4bench.blas import blas_threads
+    from h4bench.sim.design_cache import load_array, store_array
     from h4bench.trajectories.excitation import geometry_hash
 
     theta = np.ascontiguousarray(theta, dtype=float)
-    h = hashlib.blake2b(digest_size=20)
+    h = hashlib.sha256()
     h.update(geometry_hash(geometry).encode())
     h.update(theta.tobytes())
     for name in ("q", "qd", "qdd"):
         arr = np.ascontiguousarray(getattr(reference, name), dtype=float)
         h.update(str(arr.shape).encode())
         h.update(arr.tobytes())
+    h.update(_feedforward_code())
+    h.update(repr(blas_threads()).encode())
     key = h.hexdigest()
     ff = _FEEDFORWARD.get(key)
     if ff is None:
-        ff = ident.inverse_dynamics(geometry, theta, reference.q, reference.qd, reference.qdd)
+        n = np.shape(reference.q)[0]
+        ff = load_array("feedforward", key, (n, 4))
+        if ff is None:
+            ff = ident.inverse_dynamics(geometry, theta, reference.q, reference.qd, reference.qdd)
+            store_array("feedforward", key, ff)
         ff.setflags(write=False)
         if len(_FEEDFORWARD) >= FEEDFORWARD_CACHE_SIZE:
             _FEEDFORWARD.pop(next(iter(_FEEDFORWARD)))

@@ -24,7 +24,7 @@ import numpy as np
 
 from h4bench.blas import blas_threads
 
-__all__ = ["cache_root", "design_key", "load_design", "store_design"]
+__all__ = ["cache_root", "design_key", "load_array", "load_design", "store_array", "store_design"]
 
 CACHE_ENV = "H4BENCH_CACHE"
 _CODE = ("control_design.py", "controller.py", "design_cache.py")
@@ -90,6 +90,39 @@ _REPORT_FLOATS = ("bandwidth_hz", "crossover_hz", "phase_margin_deg", "gain_marg
                   "rise_time", "settling_time", "overshoot_pct")
 
 
+def _atomic_write(path: Path, write) -> None:
+    """``write(file)`` into a temp file beside ``path``, then ``os.replace``; an unwritable cache is ignored."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                write(f)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    except OSError:
+        pass
+
+
+def store_array(folder: str, key: str, arr: np.ndarray) -> None:
+    """Write a float64 array under ``cache_root() / folder / key.npy``, atomically (the key names its inputs)."""
+    _atomic_write(cache_root() / folder / f"{key}.npy",
+                  lambda f: np.save(f, np.ascontiguousarray(arr, dtype=np.float64), allow_pickle=False))
+
+
+def load_array(folder: str, key: str, shape: tuple) -> np.ndarray | None:
+    """The stored array of ``key`` if it reads back as a finite float64 array of ``shape``, else None."""
+    try:
+        arr = np.load(cache_root() / folder / f"{key}.npy", allow_pickle=False)
+    except (OSError, ValueError):
+        return None
+    if arr.dtype != np.float64 or arr.shape != tuple(shape) or not np.all(np.isfinite(arr)):
+        return None
+    return arr
+
+
 def store_design(key: str, design) -> None:
     """Write ``design`` (a ControllerDesign) under ``key``, atomically; an unwritable cache is ignored."""
     entry = {"key": key, "J": _hex(design.J), "Fv": _hex(design.Fv), "kp": _hex(design.kp), "kv": _hex(design.kv),
@@ -98,19 +131,7 @@ def store_design(key: str, design) -> None:
              "bandwidth_hz": float(design.bandwidth_hz).hex(), "phase_margin_deg": float(design.phase_margin_deg).hex(),
              "continuous": [_report_dict(r) for r in design.continuous],
              "discrete": [_report_dict(r) for r in design.discrete]}
-    path = _path(key)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as f:
-                json.dump(entry, f)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-    except OSError:
-        pass
+    _atomic_write(_path(key), lambda f: f.write(json.dumps(entry).encode()))
 
 
 def load_design(key: str, J: np.ndarray, Fv: np.ndarray, bandwidth_hz: float, dt: float, pm_deg: float,

@@ -123,6 +123,7 @@ class SimulationSettings:
     torque_gain: float = 1.5
 
 
+@functools.cache
 def _package_versions() -> dict:
     out = {}
     for dist in ("h4bench", "mujoco", "numpy", "scipy", "control", "toppra"):
@@ -272,7 +273,7 @@ def simulate(model: mujoco.MjModel, reference, *, noise: TorqueNoise | None = No
         "controller": getattr(controller, "describe", lambda: type(controller).__name__)(),
         "wall_seconds": wall,
         "mujoco_warnings": {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(data.warning) if w.number},
-        "versions": _package_versions(),
+        "versions": dict(_package_versions()),  # read once per process
     }
     meta.update(metadata or {})
     dataset = Dataset(t=t.copy(), q=rec_qm, tau=logged, metadata=meta)
@@ -381,18 +382,21 @@ class _FloatLaw:
         self.pole, self.gain = vf.pole, vf.gain
         self.qd_est = vf._qd.tolist()
         self.q_prev = None if vf._q_prev is None else vf._q_prev.tolist()
-        self.q_ref, self.qd_ref, self.ff = q_ref.tolist(), qd_ref.tolist(), ff.tolist()
+        self.q_ref, self.qd_ref, self.ff = q_ref, qd_ref, ff  # arrays (n, 4); as lists once the Python loop runs
+        self._rows = None
 
     def step_list(self, k, q_true):
         """:meth:`step` with q_true a list of 4 floats [rad]; returns (q_meas, tau) lists."""
+        if self._rows is None:
+            self._rows = (self.q_ref.tolist(), self.qd_ref.tolist(), self.ff.tolist())
+        q_ref, qd_ref, ff = self._rows
         res = self.res
         qm = [round(v / res) * res for v in q_true] if res else q_true
         q_prev = qm if self.q_prev is None else self.q_prev
         p, g = self.pole, self.gain
         integ, e_prev, qd_est, tau, sat = [], [], [], [], []
         for (kp, kv, kidt, (nt, t, lo, hi)), qmi, qpi, vi, ii, epi, qri, vri, fi in zip(
-                self.gains, qm, q_prev, self.qd_est, self.integ, self.e_prev, self.q_ref[k], self.qd_ref[k],
-                self.ff[k]):
+                self.gains, qm, q_prev, self.qd_est, self.integ, self.e_prev, q_ref[k], qd_ref[k], ff[k]):
             v = p * vi + g * (qmi - qpi)  # VelocityFilter.step
             e = kp * (qri - qmi) + vri - v  # JointController.step from here
             cand = ii + kidt * (e + epi)

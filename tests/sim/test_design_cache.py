@@ -128,3 +128,37 @@ def test_float_path_equals_array_path(model, geometry, noise):
         assert np.array_equal(getattr(d1, name), getattr(d2, name)), name
     for name in ("q", "qd", "qdd", "x", "xdd", "tau_applied", "noise", "loop_violation"):
         assert np.array_equal(getattr(t1, name), getattr(t2, name)), name
+
+
+def test_cached_feedforward_is_the_computed_one_and_never_another_inputs(tmp_path, monkeypatch, geometry):
+    """The feed-forward kept on disk is ``ident.inverse_dynamics`` of the same inputs bit for bit; another
+    reference, other parameters or another cache entry's content are never taken for it."""
+    from h4bench import ident
+    from h4bench.scenarios import experiment
+
+    monkeypatch.setenv("H4BENCH_CACHE", str(tmp_path))
+    monkeypatch.setattr(experiment, "_FEEDFORWARD", {})
+    ref = cartesian_reference(geometry, seconds=0.4, seed=1)
+    oracle = ident.inverse_dynamics(geometry, NOMINAL, ref.q, ref.qd, ref.qdd)
+    first = experiment.feedforward(geometry, NOMINAL, ref)
+    np.testing.assert_array_equal(first, oracle)
+    files = list((tmp_path / "feedforward").glob("*.npy"))
+    assert len(files) == 1
+    monkeypatch.setattr(experiment, "_FEEDFORWARD", {})  # a new process: from disk
+    monkeypatch.setattr(ident, "inverse_dynamics", lambda *a, **k: pytest.fail("recomputed"))
+    loaded = experiment.feedforward(geometry, NOMINAL, ref)
+    np.testing.assert_array_equal(loaded, oracle)
+    assert not loaded.flags.writeable
+    monkeypatch.undo()
+    monkeypatch.setenv("H4BENCH_CACHE", str(tmp_path))
+    monkeypatch.setattr(experiment, "_FEEDFORWARD", {})
+    other = cartesian_reference(geometry, seconds=0.4, seed=2)
+    np.testing.assert_array_equal(experiment.feedforward(geometry, NOMINAL, other),
+                                  ident.inverse_dynamics(geometry, NOMINAL, other.q, other.qd, other.qdd))
+    theta = NOMINAL * 1.1
+    np.testing.assert_array_equal(experiment.feedforward(geometry, theta, ref),
+                                  ident.inverse_dynamics(geometry, theta, ref.q, ref.qd, ref.qdd))
+    assert len(list((tmp_path / "feedforward").glob("*.npy"))) == 3
+    np.save(files[0], np.zeros((3, 4)))  # a damaged entry (wrong shape) is recomputed, not used
+    monkeypatch.setattr(experiment, "_FEEDFORWARD", {})
+    np.testing.assert_array_equal(experiment.feedforward(geometry, NOMINAL, ref), oracle)
