@@ -331,6 +331,25 @@ def test_instruments_are_the_reference_motion_regressor_row_aligned(paper):
     assert np.all(rel < 0.2) and np.any(rel > 1e-8), rel
 
 
+def test_instruments_kept_per_process_are_the_computed_ones(monkeypatch):
+    """The reference rows are kept by what they depend on (not the run's torques): a second run on the same
+    trajectory gets, from the kept rows, exactly what a process without them computes."""
+    from h4bench.scenarios import experiment
+    from h4bench.scenarios.registry import load_spec
+
+    spec = load_spec("paper", quick=True)
+    monkeypatch.setattr(experiment, "_INSTRUMENT_ROWS", {})
+    first = experiment.run_experiment(spec, seed=1, estimate=False)
+    experiment.instruments(first)
+    second = experiment.run_experiment(spec, seed=2, reference=first.reference, estimate=False)
+    assert not np.array_equal(first.dataset.tau, second.dataset.tau)
+    assert len(experiment._INSTRUMENT_ROWS) == 1
+    kept = experiment.instruments(second)
+    assert len(experiment._INSTRUMENT_ROWS) == 1  # the same trajectory: the rows were reused
+    monkeypatch.setattr(experiment, "_INSTRUMENT_ROWS", {})
+    np.testing.assert_array_equal(kept, experiment.instruments(second))
+
+
 def test_identify_gives_the_narrower_than_hull_verdict_without_a_truth(tmp_path):
     from h4bench.scenarios.experiment import run_experiment
     from h4bench.scenarios.identify import identify_csv
