@@ -1,7 +1,7 @@
 """Campaign speed against the physics: the ``enclosure`` campaign's wall time over bare MuJoCo stepping of the
 same simulated time, and its runs per minute with every estimator, measured in one run.
 
-    python benchmarks/bench_campaign.py [--runs 8] [--all-runs 8] [--all-workers 2] [--repeats 3] [--skip-all]
+    python benchmarks/bench_campaign.py [--runs 8] [--all-runs 32] [--all-workers 2] [--repeats 3] [--skip-all]
                                         [--out DIR] [--json] [--base-python OTHER_VENV/bin/python]
 
 1. The campaign's designed trajectories (``campaign.trajectories`` of them, full size) are looked up in the
@@ -14,7 +14,10 @@ same simulated time, and its runs per minute with every estimator, measured in o
    campaign's own timings (``result.json`` ``campaign.timings``: per stage, overhead outside the runs; goal:
    under 10 % of the wall time).
 4. ``--methods all`` with ``--all-runs`` runs on ``--all-workers`` workers: runs per minute (the campaign's
-   wall, pool start-up and report included).
+   wall, pool start-up and report included). The default, 32 runs, visits each of the 8 designed trajectories
+   four times, as a campaign does (200 runs: 25 times); with 8 runs every run is its trajectory's first in its
+   worker and the command's fixed costs (interpreter, pool, report and plots: about 2.5 s) weigh as much as
+   three runs.
 
 5. ``--base-python``: the same campaigns with another checkout's interpreter (``python -m h4bench``; e.g. a venv
    of the base commit), interleaved with this checkout's, after warming that checkout's own design cache entries:
@@ -210,7 +213,9 @@ def campaign(methods: str, runs: int, workers: int, out: Path, python: str = sys
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=8, help="runs of the hull campaign (one worker)")
-    parser.add_argument("--all-runs", type=int, default=8, help="runs of the --methods all campaign")
+    parser.add_argument("--all-runs", type=int, default=32,
+                        help="runs of the --methods all campaign (default 32: four per designed trajectory, so that "
+                             "the runs per minute are a campaign's, not its fixed start-up and report)")
     parser.add_argument("--all-workers", type=int, default=2, help="workers of the --methods all campaign")
     parser.add_argument("--repeats", type=int, default=3, help="bare-stepping measurements (median)")
     parser.add_argument("--skip-all", action="store_true", help="only the hull campaign")

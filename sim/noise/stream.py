@@ -58,7 +58,7 @@ class ErrorStream:
         self.bound = bound
         self.state_independent = pre
         pre.setflags(write=False)
-        self._pre = pre.tolist()
+        self._pre_rows = None  # the rows as lists of floats, made on first use (the compiled loop reads the array)
         # flattened for plain-float math: (order, amplitude, phase_0..3) per harmonic, (g_0..3, limit) per gain
         self.phases = [ph for _, ph in ripples]
         self.gains = [g for g, _ in gains]
@@ -69,6 +69,12 @@ class ErrorStream:
         self._gain_components = [c for _, c in gains]
         self._quantiser = quantiser
         self._fixed = not (self._ripple or self._gain)
+
+    @property
+    def _pre(self) -> list:
+        if self._pre_rows is None:
+            self._pre_rows = self.state_independent.tolist()
+        return self._pre_rows
 
     def at(self, k: int, q, tau_cmd) -> np.ndarray:
         """Error (4,) [N m] at sample k: the motors apply ``tau_cmd + at(k, q, tau_cmd)``.
