@@ -53,14 +53,13 @@ def error_budget(geometry, dataset, truth, settings: ProcessingSettings, structu
         out["total_processed_max"] = out["total_raw_max"]
         out["rows_processed"] = int(keep.sum())
         return out
-    zeros = np.zeros((y.size, 1))
-    filtered = {}
-    mask = None
-    for name, v in list(parts.items()) + [("total", total)]:
-        fe = parallel_filter(zeros, v, 0.0, settings.decimation, taps=taps)
-        if mask is None:
-            mask = fe.propagate_mask(keep)
-        filtered[name] = fe.y[mask]
+    # the parts and the total filtered together as the columns of one regressor (each column by the same recursive
+    # sum over the taps as a y alone: the same values)
+    names = list(PARTS) + ["total"]
+    fe = parallel_filter(np.column_stack([parts[k] for k in PARTS] + [total]), np.zeros(y.size), 0.0,
+                         settings.decimation, taps=taps)
+    mask = fe.propagate_mask(keep)
+    filtered = {name: fe.W[mask, i] for i, name in enumerate(names)}
     out["processed"] = {k: stats(filtered[k]) for k in PARTS}
     out["total_processed_max"] = stats(filtered["total"])["max"]
     out["rows_processed"] = int(mask.sum())
