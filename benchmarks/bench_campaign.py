@@ -1,8 +1,9 @@
 """Campaign speed against the physics: the ``enclosure`` campaign's wall time over bare MuJoCo stepping of the
 same simulated time, and its runs per minute with every estimator, measured in one run.
 
-    python benchmarks/bench_campaign.py [--runs 8] [--all-runs 32] [--all-workers 2] [--repeats 3] [--skip-all]
-                                        [--out DIR] [--json] [--base-python OTHER_VENV/bin/python]
+    python benchmarks/bench_campaign.py [--runs 8] [--all-runs 32] [--all-workers 2] [--repeats 3]
+                                        [--campaign-repeats 1] [--skip-all] [--out DIR] [--json]
+                                        [--base-python OTHER_VENV/bin/python]
 
 1. The campaign's designed trajectories (``campaign.trajectories`` of them, full size) are looked up in the
    design cache first (a cold cache designs them now: the time is printed, not counted below).
@@ -23,8 +24,9 @@ same simulated time, and its runs per minute with every estimator, measured in o
    of the base commit), interleaved with this checkout's, after warming that checkout's own design cache entries:
    its ratio to the same bare-stepping reference and the speed-ups, measured in the same run.
 
-Every figure is one wall-clock measurement on a possibly shared machine: compare the ratios of one run, not
-the absolute seconds, and repeat the command for the spread.
+Every campaign figure is one wall-clock measurement on a possibly shared machine, or with ``--campaign-repeats N``
+the median of N (each campaign of this checkout measured right after the base's; the stage timings are the last
+measurement's): compare the ratios of one run, not the absolute seconds, and repeat for the spread.
 
 Profile (cProfile, one full-size ``enclosure`` run with ``--methods hull`` in ``campaign_job``, warm design
 cache; 2 shared cores, before this benchmark's changes, commit e1fa711), 4.27 s in all:
@@ -98,6 +100,29 @@ faster), the campaign 10.2 s (3.70x), its pool 9.8 s (3.57x), median run 1.00 s 
 (1.85x), overhead 11.5 % (report 1.56 s); its runs took 4.06 s each (median; 36.2 s together, the two workers
 sharing about one free core), methods 1.79 s of it (zonotope 0.59, hull 0.41, ellipsoid 0.30, contractor 0.20, parallelotope 0.11). An
 earlier run the same hour (load 2-3): hull 4.51x (base 10.0x), overhead 8.6 %; all 1.89x, overhead 12.6 %.
+
+Profile of one full-size ``--methods hull`` run after that (a worker's second run of a trajectory, cProfile, quiet
+machine), 0.96 s: the simulation 0.54 s, of which the sample loop's Python (the law on floats, the error stream's
+``at_list``, the recording) 0.15 s above MuJoCo's own calls (``mj_forward`` 0.11 s, RK4 about 0.26 s); the
+feed-forward's inverse dynamics 0.07 s in every run that is its trajectory's first in its worker (every run of an
+8-run campaign); the hull 0.15 s (85 HiGHS runs); processing 0.11 s; the error budget 0.11 s (four parallel filters);
+the package versions read from the installed metadata in every run 0.02 s; with ``--methods all`` the IV
+instruments' reference equation 0.12 s in every run.
+
+After (this commit's benchmark): the sample loop in compiled code (``sim/_loop.cpp``, the Python loop operation for
+operation: the same bits, tested), 0.36 s for the 10 s against 0.35 s of bare stepping; the feed-forward kept in the
+design cache on disk by its inputs; the instruments' reference rows kept per worker; the versions read once per
+process; the budget's parts filtered in one call. Every quick scenario's ``result.json`` and run files are unchanged
+(``compare_results.py`` against the previous commit). Measured (2026-12-02, one run of this script with
+``--campaign-repeats 3`` and ``--base-python`` on a venv of d6155bc, 2 shared cores): bare stepping of 8 x 10 s
+median 3.03 s; ``--methods hull``, 8 runs, 1 worker: the command 8.68 s (median of 16.6, 8.5, 8.7 s), **2.86x**
+(base 21.4 s median, 7.06x: 2.47x faster), median run 0.82 s (simulation 0.37 s, processing 0.11 s, hull and the
+others 0.17 s, error budget 0.10 s), overhead 8.4 %; ``--methods all``, 32 runs, 2 workers: 69.2 runs/min against
+the base's 27.4, **2.52x**, overhead 6.7 % (zonotope 0.23 s, hull 0.17 s, contractor 0.11 s, ellipsoid 0.11 s per
+run). Single measurements the same hour spread widely with the machine's load: hull 2.87x, 2.95x, 3.34x, 3.43x;
+all 2.52x, 2.48x, 2.01x, 2.05x (8-run all campaigns, whose fixed costs weigh three runs: 2.14x). What is left per
+hull run is computation whose every bit the results carry (the hull's LPs, the forward kinematics of three
+regressor evaluations, the filters).
 """
 
 from __future__ import annotations
@@ -218,6 +243,9 @@ def main() -> None:
                              "the runs per minute are a campaign's, not its fixed start-up and report)")
     parser.add_argument("--all-workers", type=int, default=2, help="workers of the --methods all campaign")
     parser.add_argument("--repeats", type=int, default=3, help="bare-stepping measurements (median)")
+    parser.add_argument("--campaign-repeats", type=int, default=1,
+                        help="measure each campaign this many times (interleaved with the base's): the medians are "
+                             "printed, every measurement kept in the JSON")
     parser.add_argument("--skip-all", action="store_true", help="only the hull campaign")
     parser.add_argument("--out", type=Path, default=None, help="keep the campaigns' folders here")
     parser.add_argument("--json", action="store_true", help="print the figures as one JSON document")
@@ -238,25 +266,39 @@ def main() -> None:
         figures["base_design_lookup_seconds"] = warm_base(args.base_python)
     with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
         root = args.out or Path(tmp)
-        if args.base_python:
-            base_wall, _ = campaign("hull", args.runs, 1, root / "base-hull", args.base_python)
-            figures["base_hull"] = {"wall": base_wall}
-            bare.append(bare_stepping(torques, reference, args.runs))
-        wall, result = campaign("hull", args.runs, 1, root / "hull")
+        reps = max(1, args.campaign_repeats)
+        base_walls, walls = [], []
+        for _ in range(reps):
+            if args.base_python:
+                base_walls.append(campaign("hull", args.runs, 1, root / "base-hull", args.base_python)[0])
+                bare.append(bare_stepping(torques, reference, args.runs))
+            w, result = campaign("hull", args.runs, 1, root / "hull")
+            walls.append(w)
+        if base_walls:
+            figures["base_hull"] = {"wall": statistics.median(base_walls), "walls": base_walls}
+        wall = statistics.median(walls)
         for _ in range(max(1, args.repeats) - 1):
             bare.append(bare_stepping(torques, reference, args.runs))
         t = result["campaign"].get("timings") or {}  # absent in an older checkout
-        figures["hull"] = {"wall": wall, "campaign_wall": t.get("wall", result["campaign"]["seconds"]),
+        figures["hull"] = {"wall": wall, "walls": walls, "campaign_wall": t.get("wall", result["campaign"]["seconds"]),
                            "overhead": t.get("overhead"), "overhead_share": t.get("overhead_share"),
                            "stage_medians": {k: v["median"] for k, v in t.get("stages", {}).items()},
                            "run_median": (t.get("run_seconds") or {}).get("median")}
         if not args.skip_all:
-            if args.base_python:
-                base_all, _ = campaign("all", args.all_runs, args.all_workers, root / "base-all", args.base_python)
-                figures["base_all"] = {"wall": base_all, "runs_per_minute": 60.0 * args.all_runs / base_all}
-            wall_all, result_all = campaign("all", args.all_runs, args.all_workers, root / "all")
+            base_alls, alls = [], []
+            for _ in range(reps):
+                if args.base_python:
+                    base_alls.append(campaign("all", args.all_runs, args.all_workers, root / "base-all",
+                                              args.base_python)[0])
+                w, result_all = campaign("all", args.all_runs, args.all_workers, root / "all")
+                alls.append(w)
+            if base_alls:
+                base_all = statistics.median(base_alls)
+                figures["base_all"] = {"wall": base_all, "walls": base_alls,
+                                       "runs_per_minute": 60.0 * args.all_runs / base_all}
+            wall_all = statistics.median(alls)
             ta = result_all["campaign"].get("timings") or {}
-            figures["all"] = {"wall": wall_all, "runs": args.all_runs, "workers": args.all_workers,
+            figures["all"] = {"wall": wall_all, "walls": alls, "runs": args.all_runs, "workers": args.all_workers,
                               "runs_per_minute": 60.0 * args.all_runs / wall_all,
                               "overhead_share": ta.get("overhead_share"), "exit_code": result_all["exit_code"],
                               "methods_without_box": sorted(k for k, m in result_all["methods"].items()
