@@ -111,7 +111,8 @@ def compiled_loop(law, stream, model, data, qm, n, substeps, efc_pos, records, p
     terms = getattr(stream, "compiled_terms", None)
     terms = terms() if callable(terms) else None
     first = _first_step(model)
-    if terms is None or first is None or model.nu != N_JOINTS:
+    if terms is None or first is None or model.nu != N_JOINTS or not (hasattr(model, "_address")
+                                                                       and hasattr(data, "_address")):
         return False
     ext = _extension()
     _, fn = _library()
