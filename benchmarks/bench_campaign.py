@@ -119,7 +119,9 @@ median 3.03 s; ``--methods hull``, 8 runs, 1 worker: the command 8.68 s (median 
 (base 21.4 s median, 7.06x: 2.47x faster), median run 0.82 s (simulation 0.37 s, processing 0.11 s, hull and the
 others 0.17 s, error budget 0.10 s), overhead 8.4 %; ``--methods all``, 32 runs, 2 workers: 69.2 runs/min against
 the base's 27.4, **2.52x**, overhead 6.7 % (zonotope 0.23 s, hull 0.17 s, contractor 0.11 s, ellipsoid 0.11 s per
-run). Single measurements the same hour spread widely with the machine's load: hull 2.87x, 2.95x, 3.34x, 3.43x;
+run). A second run half an hour later: bare 2.96 s; hull 9.01 s, 3.04x (base 6.77x), overhead 7.3 %; all 68.2
+runs/min against 26.1, 2.61x, overhead 7.6 %. Single measurements the same hour spread widely with the machine's
+load: hull 2.87x, 2.95x, 3.34x, 3.43x;
 all 2.52x, 2.48x, 2.01x, 2.05x (8-run all campaigns, whose fixed costs weigh three runs: 2.14x). What is left per
 hull run is computation whose every bit the results carry (the hull's LPs, the forward kinematics of three
 regressor evaluations, the filters).
