@@ -17,8 +17,11 @@ entry                       unit      meaning
 ``torque_timing``           -         "hold": logged torque k is held over ``[t_k, t_k + dt)``; "sample":
                                       it is the torque at the instant ``t_k``
 ``latency``                 s         bound on the delay between the logged and the applied torque
-``torque_rate``             N m/s     (n,) bound on ``|d tau / dt|`` of the applied torque (used with a
-                                      latency; None: unknown, then ``latency`` must be 0)
+``torque_rate``             N m/s     (n,) bound on ``|d tau / dt|`` of the applied torque apart from the
+                                      Coulomb friction's steps at reversals (used with a latency and with
+                                      sample-instant torques; None: unknown, then ``latency`` must be 0).
+                                      The steps need no entry: on a row they lie in the Coulomb column's
+                                      sign interval (``ident.processing.weakform.coulomb_columns``)
 ``torque_error``            N m       (n,) bound on ``|applied - logged|`` torque (drive, current sensing,
                                       gain, ripple, ...)
 ``qd_max``, ``qdd_max``     rad/s,    (n,) stated bounds of the TRUE motion's speed and acceleration

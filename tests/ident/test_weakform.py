@@ -5,8 +5,8 @@ import pytest
 from scipy.integrate import quad
 
 from h4bench import ident, sim
-from h4bench.ident.processing.weakform import (imot_columns, make_kernel, row_windows, torque_rows,
-                                               viscous_columns)
+from h4bench.ident.processing.weakform import (coulomb_columns, imot_columns, make_kernel, row_windows,
+                                               torque_rows, viscous_columns)
 from h4bench.ident.robots.h4_certified import nacelle_terms
 
 H = 1e-3
@@ -147,3 +147,39 @@ def test_torque_side_for_sample_instant_torques_is_within_the_rate_term():
     assert exact == pytest.approx(rho * H / 4, rel=0.01)  # mean of the zig-zag rho h / 4; the bound is rho h / 2
     with pytest.raises(ValueError, match="timing must be 'hold' or 'sample'"):
         torque_rows(lin, win, k, "mid")
+
+
+
+def test_coulomb_steps_of_sample_instant_torques_lie_in_the_coulomb_column():
+    """Coulomb friction ``fs sign(qd)`` logged at the sample instants steps at each reversal, so no bound on
+    ``|d tau / dt|`` covers the interpolation of the samples on the reversing step (the quadrature oracle below
+    differs from ``y`` by more than a rate term of a torque constant between the steps allows). It
+    needs no term of its own: on a step whose sign is certain the interpolation is exact, and on an uncertain step
+    the interpolation of the samples is a k-weighted value in ``[-fs, fs]``, i.e. ``fs`` times a value that the
+    Coulomb column's interval ``[-1, 1] K_w`` allows. Checked: ``y`` lies in ``fs [value - radius, value +
+    radius]`` on every row, and so does the exact integral (oracle: scipy quadrature on the true motion)."""
+    n, L, fs = 600, 40, 1.7
+    k = make_kernel(L, H, "triangle")
+    win = row_windows(n, L, 3)
+    t = H * np.arange(n)
+    w = 2 * np.pi * 2.3
+    q_true = np.stack([0.2 * np.sin(w * t + 0.3), 0.1 * np.cos(w * t)], axis=1)  # reversals between the samples
+    qd = lambda s: np.stack([0.2 * w * np.cos(w * s + 0.3), -0.1 * w * np.sin(w * s)], axis=-1)  # noqa: E731
+    e = np.full_like(q_true, 1e-7)
+    q = q_true + e * np.cos(t)[:, None]  # within the error bounds
+    qdd_max = np.array([0.2 * w**2, 0.1 * w**2])
+    y = torque_rows(fs * np.sign(qd(t)), win, k, "sample")[0]
+    value, radius, uncertain = coulomb_columns(q, e, win, k, qdd_max)
+    assert uncertain.any(axis=0).all()  # every joint reverses
+    worst = 0.0
+    for r in range(win.start.size):
+        t0 = H * win.start[r]
+        for j in range(2):
+            exact = quad(lambda s: k_of(k, t0)(s) * fs * np.sign(qd(s)[j]), t0, t0 + L * H, limit=400,
+                         points=t0 + H * np.arange(L + 1))[0]
+            assert abs(exact - fs * value[r, j]) <= fs * radius[r, j] + 1e-9  # the sign interval holds the truth
+            assert abs(y[r, j] - fs * value[r, j]) <= fs * radius[r, j] + 1e-12  # and the logged samples' row
+            worst = max(worst, abs(y[r, j] - exact))
+    # the interpolation misses the step: as a rate term it would need |d tau/dt| >= 2 worst / h (> 68 N m/s here,
+    # for a torque that is constant apart from the steps)
+    assert worst > 0.04 * fs
