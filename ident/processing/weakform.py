@@ -31,7 +31,8 @@ import numpy as np
 
 from h4bench.ident.numerics.interval import dot_error, up
 
-__all__ = ["KERNEL_SHAPES", "Kernel", "RowWindows", "coulomb_columns", "make_kernel", "nonlinear_columns",
+__all__ = ["KERNEL_SHAPES", "Kernel", "NonlinearSteps", "RowWindows", "coulomb_columns", "make_kernel",
+           "nonlinear_columns", "nonlinear_rows", "nonlinear_steps",
            "imot_columns", "row_windows", "torque_rows", "viscous_columns"]
 
 KERNEL_SHAPES = ("hann", "triangle")
@@ -205,9 +206,10 @@ def coulomb_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max):
     return value, radius, ~certain
 
 
-def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_max, qdd_max, curvature,
-                      encoder=None, chunk: int = 512):
-    """Columns ``dP/dt + F`` with configuration-dependent ``P(q, qd)``, ``F(q, qd)`` (n_out outputs, nc columns).
+def nonlinear_steps(evaluate, q, e, h: float, qd_max, qdd_max, curvature, encoder=None) -> "NonlinearSteps":
+    """The per-step stage of columns ``dP/dt + F`` with configuration-dependent ``P(q, qd)``, ``F(q, qd)`` (n_out
+    outputs, nc columns): everything that does not depend on the kernel, computed once per log; the rows of any
+    kernel and windows follow from it (:func:`nonlinear_rows`), so that several kernels cost one evaluation.
 
     evaluate : ``f(q_m (S, n_j), v (S, n_j)) -> (P, F)``, each a first-order :class:`~ident.numerics.jets.Jet`
     of value shape (S, n_out, nc) in the 2 n_j variables (q, qd): rigorous enclosures of the values and the
@@ -223,13 +225,8 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     magnitudes of interval jets over those boxes (:func:`ident.robots.h4_jets.box_jets`): used by the encoder's
     second-order term and to carry the gradients from the measured to the true secant state.
 
-    Returns (value, meas, trunc, second), each (R, n_out, nc): the centre; the first-order encoder radius
-    ``sum_u |dPhi / dq_u| e_u`` (the gradient of the row functional, enclosed) plus the enclosures' own radii; the
-    truncation radius (chord remainder, linear terms exactly integrated, second-order remainder over the step's
-    motion box); the encoder's second-order term. The second-order part of ``trunc`` rests on ``curvature``;
-    ``second`` and the gradients' transfer to the true state rest on ``encoder``.
+    h : the sample period [s]. Returns a :class:`NonlinearSteps` (the rows' meaning: :func:`nonlinear_rows`).
     """
-    h = kernel.h
     qm, v = _secant(q, h)
     S, nj = qm.shape
     Pj, Fj = evaluate(qm, v)
@@ -288,13 +285,62 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     # encoder second-order: 1/2 eps^T M eps per step
     s2P = 0.5 * np.einsum("sicab,sa,sb->sic", MPe, eps, eps)
     s2F = 0.5 * np.einsum("sicab,sa,sb->sic", MFe, eps, eps)
-    s, K, km = kernel.slopes, kernel.integrals, kernel.mids
     # derivative of step j's term with respect to q_j (A) and q_j+1 (B), per unit weight
     dPa, dPb = 0.5 * Pq - Pv / h, 0.5 * Pq + Pv / h
     dFa, dFb = 0.5 * Fq - Fv / h, 0.5 * Fq + Fv / h
     # the enclosures' radii: of the values (per step) and of the gradients (per step and variable)
     rPa, rFa = 0.5 * Pq_r + Pv_r / h, 0.5 * Fq_r + Fv_r / h  # the same for A and B
     mPa, mFa = 0.5 * np.abs(Pq) + np.abs(Pv) / h, 0.5 * np.abs(Fq) + np.abs(Fv) / h  # magnitudes for rounding
+    return NonlinearSteps(h=float(h), e=np.asarray(e, dtype=float), P=P, F=F, P_r=Pj.v.r, F_r=Fj.v.r, dPa=dPa,
+                          dPb=dPb, dFa=dFa, dFb=dFb, rPa=rPa, rFa=rFa, mPa=mPa, mFa=mFa, t_s=t_s, t_k=t_k, s2P=s2P,
+                          s2F=s2F)
+
+
+@dataclass(frozen=True)
+class NonlinearSteps:
+    """Per sample step j (S steps; arrays (S, n_out, nc) or (S, n_out, nc, n_j)) what the rows of
+    :func:`nonlinear_rows` sum: the values ``P``, ``F`` and their enclosures' radii, the row functional's
+    derivatives with respect to ``q_j`` (``dPa``, ``dFa``) and ``q_j+1`` (``dPb``, ``dFb``) per unit weight, their
+    radii (``rPa``, ``rFa``) and magnitudes for rounding (``mPa``, ``mFa``), the truncation pieces per unit
+    ``|s_w|`` (``t_s``) and ``|k_mid,w|`` (``t_k``), the encoder's second-order pieces (``s2P``, ``s2F``); ``e``
+    (n, n_j) the position error bounds [rad], ``h`` the sample period [s]."""
+
+    h: float
+    e: np.ndarray
+    P: np.ndarray
+    F: np.ndarray
+    P_r: np.ndarray
+    F_r: np.ndarray
+    dPa: np.ndarray
+    dPb: np.ndarray
+    dFa: np.ndarray
+    dFb: np.ndarray
+    rPa: np.ndarray
+    rFa: np.ndarray
+    mPa: np.ndarray
+    mFa: np.ndarray
+    t_s: np.ndarray
+    t_k: np.ndarray
+    s2P: np.ndarray
+    s2F: np.ndarray
+
+
+def nonlinear_rows(st: NonlinearSteps, windows: RowWindows, kernel: Kernel, chunk: int = 512):
+    """The rows of the nonlinear columns for a kernel and row windows, from their per-step stage.
+
+    Returns (value, meas, trunc, second), each (R, n_out, nc): the centre; the first-order encoder radius
+    ``sum_u |dPhi / dq_u| e_u`` (the gradient of the row functional, enclosed) plus the enclosures' own radii; the
+    truncation radius (chord remainder, linear terms exactly integrated, second-order remainder over the step's
+    motion box); the encoder's second-order term. The second-order part of ``trunc`` rests on ``curvature``;
+    ``second`` and the gradients' transfer to the true state rest on ``encoder`` (:func:`nonlinear_steps`).
+    """
+    if abs(kernel.h - st.h) > 1e-12 * st.h:
+        raise ValueError(f"kernel.h must be the steps' sample period {st.h!r} s, got {kernel.h!r}")
+    h, e = st.h, st.e
+    P, F, dPa, dPb, dFa, dFb = st.P, st.F, st.dPa, st.dPb, st.dFa, st.dFb
+    rPa, rFa, mPa, mFa, t_s, t_k, s2P, s2F = st.rPa, st.rFa, st.mPa, st.mFa, st.t_s, st.t_k, st.s2P, st.s2F
+    n_out, nc = P.shape[1:]
+    s, K, km = kernel.slopes, kernel.integrals, kernel.mids
     R = windows.start.size
     L = kernel.steps
     value = np.empty((R, n_out, nc))
@@ -305,8 +351,8 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
         value[r0:r0 + chunk] = -h * np.einsum("w,rwic->ric", s, gPw) + np.einsum("w,rwic->ric", K, gFw)
         fp = dot_error(h * np.einsum("w,rwic->ric", np.abs(s), np.abs(gPw))
                        + np.einsum("w,rwic->ric", np.abs(K), np.abs(gFw)), 2 * L)
-        fp = fp + (h * np.einsum("w,rwic->ric", np.abs(s), sub.gather(Pj.v.r))
-                   + np.einsum("w,rwic->ric", np.abs(K), sub.gather(Fj.v.r))) * (1 + 4 * L * 2.0**-53)
+        fp = fp + (h * np.einsum("w,rwic->ric", np.abs(s), sub.gather(st.P_r))
+                   + np.einsum("w,rwic->ric", np.abs(K), sub.gather(st.F_r))) * (1 + 4 * L * 2.0**-53)
         A = -h * np.einsum("w,rwica->rwica", s, sub.gather(dPa)) + np.einsum("w,rwica->rwica", K, sub.gather(dFa))
         B = -h * np.einsum("w,rwica->rwica", s, sub.gather(dPb)) + np.einsum("w,rwica->rwica", K, sub.gather(dFb))
         grad = np.zeros((A.shape[0], L + 1) + A.shape[2:])
@@ -333,3 +379,10 @@ def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_ma
     # the float sums above add at most (4 L + 256) u relative error (nonnegative terms)
     grow = 1.0 + (4 * L + 256) * 2.0**-53
     return value, meas, up(trunc * grow), up(second * grow)
+
+
+def nonlinear_columns(evaluate, q, e, windows: RowWindows, kernel: Kernel, qd_max, qdd_max, curvature,
+                      encoder=None, chunk: int = 512):
+    """:func:`nonlinear_steps` then :func:`nonlinear_rows` for one kernel (the arguments of both)."""
+    steps = nonlinear_steps(evaluate, q, e, kernel.h, qd_max, qdd_max, curvature, encoder=encoder)
+    return nonlinear_rows(steps, windows, kernel, chunk=chunk)

@@ -29,16 +29,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.processing.errorspec import ErrorSpec
-from h4bench.ident.processing.weakform import (coulomb_columns, imot_columns, make_kernel, nonlinear_columns,
-                                               row_windows, torque_rows, viscous_columns)
+from h4bench.ident.processing.choice import MIN_KERNEL_STEPS, candidate_lengths, choose_kernel, sample_starts
+from h4bench.ident.processing.weakform import (NonlinearSteps, RowWindows, coulomb_columns, imot_columns,
+                                               make_kernel, nonlinear_rows, nonlinear_steps, row_windows,
+                                               torque_rows, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
 from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
 from h4bench.ident.robots.h4_jets import box_jets, point_jets
 
-__all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "Processing", "certified_equation", "curvature_bounds",
-           "nacelle_terms"]
+__all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "CertifiedSteps", "Processing", "certified_equation",
+           "certified_rows", "certified_steps", "curvature_bounds", "nacelle_terms"]
 
 CURVATURE_FACTOR = 2.0  # stated factor on the sampled second-derivative maxima (not proven; see module docstring)
 N_JOINTS = 4
@@ -46,10 +48,11 @@ N_JOINTS = 4
 
 @dataclass(frozen=True)
 class Processing:
-    """The weak form's processing settings (a scenario's ``[certified]`` table): kernel length in sample steps,
-    its shape, the stride between rows [samples] and the sampling of the curvature bounds [steps]."""
+    """The weak form's processing settings (a scenario's ``[certified]`` table): kernel length in sample steps
+    (None: chosen from the specification, :func:`certified_equation`), its shape, the stride between rows
+    [samples] and the sampling of the curvature bounds [steps]."""
 
-    kernel_steps: int = 100
+    kernel_steps: int | None = None
     kernel_shape: str = "hann"
     stride: int = 2
     curvature_every: int = 10
@@ -131,21 +134,64 @@ def curvature_bounds(geometry, q, h: float, every: int = 10, factor: float = CUR
 
 
 def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing | None = None,
-                       position_error=None) -> CertifiedEquation:
+                       position_error=None, prior_abs=2.0) -> CertifiedEquation:
     """The H4's derived interval equation of a log: q (n, 4) measured positions [rad], tau (n, 4) logged torques
     [N m] (held over each step, or the torque at each sample instant: ``spec.torque_timing``), spec the error
     specification (4 joints).
 
+    processing : the weak form's settings; ``kernel_steps = None`` (the default) chooses the kernel length from the
+    specification and the measured positions (:func:`ident.processing.choice.choose_kernel`: the length of least
+    median relative row radius at ``prior_abs``; ``info["kernel_choice"]`` says which and why); an explicit
+    length wins, and one below :data:`ident.processing.choice.MIN_KERNEL_STEPS` is refused.
     position_error : (n, 4) bounds of the position error [rad]; default ``spec.position_error(q)`` (0 gives the
     equation of exact positions, used by the certificate to check the truncation terms alone).
+    prior_abs : scalar or (14,) the prior's largest parameter magnitudes (the paper's prior [0, 2]: 2), read by the
+    kernel choice only.
     """
-    from h4bench.sim.kinematics import forward_kinematics  # noqa: PLC0415
-
     processing = processing or Processing()
     q = np.asarray(q, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if q.ndim != 2 or q.shape[1] != N_JOINTS or tau.shape != q.shape:
         raise ValueError(f"q and tau must have the same shape (n, {N_JOINTS}), got {q.shape} and {tau.shape}")
+    steps = certified_steps(geometry, q, spec, processing, position_error)
+    h = spec.sample_period
+    info = {}
+    L = processing.kernel_steps
+    if L is None:
+        choice = _choose(steps, processing, prior_abs)
+        L = choice.steps
+        info["kernel_choice"] = choice.to_dict()
+    elif isinstance(L, bool) or not isinstance(L, (int, np.integer)) or L < MIN_KERNEL_STEPS:
+        raise ValueError(f"processing.kernel_steps must be an integer >= {MIN_KERNEL_STEPS} (shorter kernels leave "
+                         f"the encoder terms at their largest), or None to choose it, got {L!r}")
+    kernel = make_kernel(int(L), h, processing.kernel_shape)
+    windows = row_windows(q.shape[0], int(L), processing.stride)
+    eq = certified_rows(steps, kernel, windows, tau)
+    eq.info.update(kernel_shape=processing.kernel_shape, stride=processing.stride,
+                   curvature_every=processing.curvature_every, **info)
+    return eq
+
+
+@dataclass(frozen=True)
+class CertifiedSteps:
+    """The kernel-independent stage of the H4's certified equation of a log (:func:`certified_steps`): q, e (n, 4)
+    the measured positions and their error bounds [rad], spec, the nonlinear columns' per-step stage, the counts
+    of verified boxes and the statements of what is not proven."""
+
+    q: np.ndarray
+    e: np.ndarray
+    spec: ErrorSpec
+    nonlinear: NonlinearSteps
+    proven: np.ndarray
+    proven_motion: np.ndarray
+
+
+def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, position_error=None) -> CertifiedSteps:
+    """Everything of the certified equation that does not depend on the kernel: the position error bounds, the
+    interval jets of every step's encoder box and motion tube (or the sampled fallback), and the nonlinear
+    columns' per-step stage (:func:`ident.processing.weakform.nonlinear_steps`). q (n, 4) [rad]."""
+    from h4bench.sim.kinematics import forward_kinematics  # noqa: PLC0415
+
     if spec.n_joints != N_JOINTS:
         raise ValueError(f"spec must describe {N_JOINTS} joints (the H4), got n_joints = {spec.n_joints}")
     if spec.latency > 0 and spec.torque_rate is None:
@@ -153,23 +199,6 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     h = spec.sample_period
     e = spec.position_error(q) if position_error is None else np.broadcast_to(
         np.asarray(position_error, dtype=float), q.shape)
-    kernel = make_kernel(processing.kernel_steps, h, processing.kernel_shape)
-    windows = row_windows(q.shape[0], processing.kernel_steps, processing.stride)
-    R = windows.start.size
-    p = len(PARAMETER_NAMES)
-    cols = {name: np.zeros((R, N_JOINTS, p)) for name in ("value", "measurement", "truncation", "second_order",
-                                                          "sign")}
-    joint = np.arange(N_JOINTS)
-    for offset, fn in ((0, imot_columns), (6, viscous_columns), (10, coulomb_columns)):
-        args = (q, e, windows, kernel) + (() if fn is imot_columns else (spec.qdd_max,))
-        value, r1, r2 = fn(*args)
-        cols["value"][:, joint, offset + joint] = value
-        if fn is coulomb_columns:
-            cols["sign"][:, joint, offset + joint] = r1
-            sign_uncertain = r2
-        else:
-            cols["measurement"][:, joint, offset + joint] = r1
-            cols["truncation"][:, joint, offset + joint] = r2
     qm = 0.5 * (q[:-1] + q[1:])
     pose = np.atleast_2d(forward_kinematics(geometry, qm))
 
@@ -205,28 +234,86 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
             got[~proven_m] = sampled[~proven_m]
         for got in (GP, GF):
             got[~proven] = np.inf
-    value, meas, trunc, second = nonlinear_columns(evaluate, q, e, windows, kernel, spec.qd_max, spec.qdd_max,
-                                                   (HPm, HFm), encoder=(HP, HF, GP, GF))
+    nonlinear = nonlinear_steps(evaluate, q, e, h, spec.qd_max, spec.qdd_max, (HPm, HFm), encoder=(HP, HF, GP, GF))
+    return CertifiedSteps(q=q, e=e, spec=spec, nonlinear=nonlinear, proven=proven, proven_motion=proven_m)
+
+
+def _torque_side_bound(spec: ErrorSpec, l1: float):
+    """(torque, model) parts of every row's bound [N m] (4,) each: the stated torque error, and the model error
+    plus the latency and, for sample-instant torques, the applied torque between samples (torque_rows)."""
+    h = spec.sample_period
+    model = np.asarray(spec.model_error, dtype=float) * np.ones(N_JOINTS)
+    rate = np.zeros(N_JOINTS) if spec.torque_rate is None else np.asarray(spec.torque_rate, dtype=float)
+    lat = rate * (spec.latency + (h / 2 if spec.torque_timing == "sample" else 0.0))
+    return spec.torque_error * l1 * np.ones(N_JOINTS), (model + lat) * l1
+
+
+def _regressor_columns(steps: CertifiedSteps, kernel, windows):
+    """The regressor side of the rows: {value, measurement, truncation, second_order, sign} (R, 4, 14) and the
+    Coulomb columns' uncertain steps."""
+    q, e, spec = steps.q, steps.e, steps.spec
+    R = windows.start.size
+    p = len(PARAMETER_NAMES)
+    cols = {name: np.zeros((R, N_JOINTS, p)) for name in ("value", "measurement", "truncation", "second_order",
+                                                          "sign")}
+    joint = np.arange(N_JOINTS)
+    for offset, fn in ((0, imot_columns), (6, viscous_columns), (10, coulomb_columns)):
+        args = (q, e, windows, kernel) + (() if fn is imot_columns else (spec.qdd_max,))
+        value, r1, r2 = fn(*args)
+        cols["value"][:, joint, offset + joint] = value
+        if fn is coulomb_columns:
+            cols["sign"][:, joint, offset + joint] = r1
+            sign_uncertain = r2
+        else:
+            cols["measurement"][:, joint, offset + joint] = r1
+            cols["truncation"][:, joint, offset + joint] = r2
+    value, meas, trunc, second = nonlinear_rows(steps.nonlinear, windows, kernel)
     cols["value"][..., 4:6] = value
     cols["measurement"][..., 4:6] = meas
     cols["truncation"][..., 4:6] = trunc
     cols["second_order"][..., 4:6] = second
+    return cols, sign_uncertain
+
+
+def _choose(steps: CertifiedSteps, processing: Processing, prior_abs):
+    """The kernel length of least median relative row radius (:func:`ident.processing.choice.choose_kernel`) on an
+    evenly spread sample of windows; reads the positions and the specification, never the torques."""
+    n, h = steps.q.shape[0], steps.spec.sample_period
+    theta_abs = np.broadcast_to(np.abs(np.asarray(prior_abs, dtype=float)), (len(PARAMETER_NAMES),))
+
+    def evaluate(L):
+        kernel = make_kernel(L, h, processing.kernel_shape)
+        windows = RowWindows(start=sample_starts(n, L), steps=L)
+        cols, _ = _regressor_columns(steps, kernel, windows)
+        D = sum(cols[k] for k in ("measurement", "truncation", "second_order", "sign"))
+        torque, model = _torque_side_bound(steps.spec, kernel.l1)
+        R = windows.start.size
+        return (cols["value"].reshape(-1, len(PARAMETER_NAMES)), D.reshape(-1, len(PARAMETER_NAMES)),
+                np.tile(torque + model, R))
+
+    return choose_kernel(evaluate, candidate_lengths(n, h, even=False), theta_abs)
+
+
+def certified_rows(steps: CertifiedSteps, kernel, windows, tau) -> CertifiedEquation:
+    """The certified equation's rows for one kernel and its windows, from the per-step stage and the logged
+    torques tau (n, 4) [N m]."""
+    spec = steps.spec
+    R = windows.start.size
+    p = len(PARAMETER_NAMES)
+    joint = np.arange(N_JOINTS)
+    cols, sign_uncertain = _regressor_columns(steps, kernel, windows)
     y, fp, l1 = torque_rows(tau, windows, kernel, spec.torque_timing)
-    model = np.asarray(spec.model_error, dtype=float) * np.ones(N_JOINTS)
-    rate = np.zeros(N_JOINTS) if spec.torque_rate is None else np.asarray(spec.torque_rate, dtype=float)
-    # latency, and for sample-instant torques the applied torque between samples (torque_rows' docstring)
-    lat = rate * (spec.latency + (h / 2 if spec.torque_timing == "sample" else 0.0))
-    terms_b = {"torque": np.broadcast_to(spec.torque_error * l1, (R, N_JOINTS)),
-               "model": np.broadcast_to((model + lat) * l1, (R, N_JOINTS)), "rounding": fp}
+    torque, model = _torque_side_bound(spec, l1)
+    terms_b = {"torque": np.broadcast_to(torque, (R, N_JOINTS)), "model": np.broadcast_to(model, (R, N_JOINTS)),
+               "rounding": fp}
     m = R * N_JOINTS
     terms = {k: np.ascontiguousarray(v).reshape(m) for k, v in terms_b.items()}
     terms.update({k: cols[k].reshape(m, p) for k in ("measurement", "truncation", "second_order", "sign")})
     D = terms["measurement"] + terms["truncation"] + terms["second_order"] + terms["sign"]
     bound = terms["torque"] + terms["model"] + terms["rounding"]
-    info = {"kernel_steps": processing.kernel_steps, "kernel_shape": processing.kernel_shape,
-            "stride": processing.stride, "kernel_l1": l1, "rows": m, "windows": R,
-            "sign_uncertain_steps": int(sign_uncertain.sum()), "steps": int(q.shape[0] - 1),
-            "curvature_factor": CURVATURE_FACTOR, "curvature_every": processing.curvature_every,
+    proven, proven_m = steps.proven, steps.proven_motion
+    info = {"kernel_steps": kernel.steps, "kernel_l1": l1, "rows": m, "windows": R, "sign_uncertain_steps": int(sign_uncertain.sum()),
+            "steps": int(steps.q.shape[0] - 1), "curvature_factor": CURVATURE_FACTOR,
             "encoder_boxes_proven": int(proven.sum()), "motion_boxes_proven": int(proven_m.sum()),
             "not_proven": ([f"second_order (Mnac, Ibc) on {int((~proven).sum())} of {proven.size} steps whose encoder "
                             f"box could not be verified: sampled second-derivative bounds x {CURVATURE_FACTOR:g}"]
