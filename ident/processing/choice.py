@@ -1,115 +1,78 @@
-"""The certified equation's processing chosen from the specification: the kernel length that minimises the rows'
-relative radius.
+"""The certified equation's processing from the specification: every kernel of a family at once, no single pick.
 
-Every radius of a certified row is a known function of the processing: the encoder terms fall with the kernel's
-length (the slope's total variation scales as ``1 / T^2``, the summed-by-parts speed terms as ``1 / T``), the
-motion terms (within-step variation, speed estimates, second-order remainders) stay about constant, the Coulomb
-sign term grows with the share of windows that hold a reversal, and the torque term is the stated bound times
-``integral |k| = 1``. A longer kernel also averages the motion out of the rows (their signal ``|Wc| theta``
-falls once the kernel is as long as the motion's fastest components). The rule weighs the two by evaluating the
-robot's own certified equation, for each candidate length, on the same evenly spread sample of windows, and
-scoring it by the median over those rows of the **relative row radius**
+Every radius of a certified row is a known function of the kernel: the encoder terms fall with its length ``T``
+(the slope's total variation scales as ``1 / T^2``, the summed-by-parts speed terms as ``1 / T``), the motion
+terms (within-step variation, speed estimates, second-order remainders) stay about constant, the Coulomb sign
+term follows the share of windows that hold a reversal, and the torque term is the stated bound times
+``integral |k| = 1``. Which length gives the narrowest box depends on more than the radii, though: a longer
+kernel averages the motion out of the rows (the columns' contrasts, e.g. Coulomb against viscous friction, fade)
+and its neighbouring rows say nearly the same thing. Scores built on the radii alone (the median relative row
+radius, or a least-squares covariance of the rows scaled by their radii) do not rank the lengths as their boxes
+do (``benchmarks/certified_kernels.py`` prints each length's box beside the family's).
 
-    rho(L) = (bound + D |theta|) / (|Wc| |theta|),     |theta| = the prior's largest magnitudes,
+No pick is needed. For the same log and specification, **every** kernel gives a true interval equation (each
+radius is derived from the specification for that kernel), so the true parameters satisfy all of them at once:
+the rows of a whole family of kernels stacked are one interval equation whose Oettli-Prager set is the
+intersection of the single kernels' sets, and its hull is at most as wide as the best single kernel's, whichever
+that is. The family (:func:`kernel_family`) is a geometric grid of lengths (factor ~1.6) from ``SHORTEST_S`` to
+``LONGEST_S`` (at most a tenth of the log), each with a row stride that grows with its length (a kernel's
+neighbouring rows overlap by ``1 - stride / L``: ``stride = max(stride, L // STRIDE_DIVISOR)`` keeps the long
+kernels' rows few). It reads only the log's length, its sample period and the stated stride: never the torques,
+never a truth. Explicit settings (a spec file's ``[certified]`` ``kernel_steps``) give one kernel instead.
 
-the size of the row's uncertainty against its signal at the worst parameters the prior allows (a row whose
-radius is a small fraction of its signal narrows the set; the Oettli-Prager set's width grows with it). The
-chosen length is the candidate of least score (the shorter one on a tie). It reads only the specification, the
-measured positions (through the equation's regressor side and radii) and the prior: never the torques, never a
-truth. Explicit settings (a spec file's ``[certified]`` table) win over the rule.
-
-Too-short kernels are refused by :func:`minimum_kernel_steps`: a kernel shorter than the stated minimum
-(``MIN_KERNEL_SECONDS``, and never fewer than ``MIN_KERNEL_STEPS`` steps) leaves the encoder terms at their
-largest, and a log must give more rows than parameters.
+Too-short kernels are refused: under :data:`MIN_KERNEL_STEPS` steps the encoder terms (``~ e / T^2``) leave
+the rows uninformative.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
-import numpy as np
+__all__ = ["KernelFamily", "LONGEST_S", "MIN_KERNEL_STEPS", "SHORTEST_S", "STRIDE_DIVISOR", "check_kernel_steps",
+           "kernel_family"]
 
-__all__ = ["KernelChoice", "MIN_KERNEL_STEPS", "candidate_lengths", "choose_kernel", "minimum_kernel_steps",
-           "relative_radius", "sample_starts"]
-
-MIN_KERNEL_STEPS = 10  # a kernel of fewer sample steps is refused (its slope's variation is ~ 16 / (L h)^2)
-SAMPLE_WINDOWS = 24  # windows per candidate in the score's sample
+MIN_KERNEL_STEPS = 20  # a kernel of fewer sample steps is refused (its slope's variation is ~ 16 / (L h)^2)
+SHORTEST_S = 0.04  # [s] the family's shortest kernel
+LONGEST_S = 0.8  # [s] the family's longest kernel (and at most a tenth of the log)
+FACTOR = 1.6  # ratio of consecutive lengths
+STRIDE_DIVISOR = 16  # a kernel of L steps takes rows every max(stride, L // STRIDE_DIVISOR) samples
 
 
 @dataclass(frozen=True)
-class KernelChoice:
-    """steps : the chosen kernel length [sample steps]; scores : {steps: median relative row radius};
-    rule : a one-line statement of the rule, for result.json; sampled_windows : windows per candidate."""
+class KernelFamily:
+    """steps : kernel lengths [sample steps], increasing; strides : the row stride of each [samples]."""
 
-    steps: int
-    scores: dict = field(default_factory=dict)
-    rule: str = ""
-    sampled_windows: int = 0
+    steps: tuple[int, ...]
+    strides: tuple[int, ...]
 
     def to_dict(self) -> dict:
-        return {"steps": int(self.steps), "scores": {str(k): float(v) for k, v in self.scores.items()},
-                "rule": self.rule, "sampled_windows": int(self.sampled_windows)}
+        return {"steps": list(self.steps), "strides": list(self.strides),
+                "rule": "every kernel of a geometric grid (factor 1.6) from "
+                        f"{SHORTEST_S:g} s to {LONGEST_S:g} s (at most a tenth of the log), rows stacked; stride "
+                        f"max(stride, L // {STRIDE_DIVISOR})"}
 
 
-def candidate_lengths(n_samples: int, dt: float, *, shortest_s: float = 0.04, longest_s: float = 0.8,
-                      even: bool = True) -> list[int]:
-    """Kernel lengths [steps] on a geometric grid (factor ~1.6) from ``shortest_s`` to ``longest_s`` [s], each at
-    most a tenth of the log (so that the rows are many and spread) and at least :data:`MIN_KERNEL_STEPS`; even
-    when ``even`` (a triangle's apex on a sample)."""
-    hi = max(MIN_KERNEL_STEPS, min(int(round(longest_s / dt)), (n_samples - 1) // 10))
-    lo = max(MIN_KERNEL_STEPS, min(int(round(shortest_s / dt)), hi))
-    out, L = [], float(lo)
+def check_kernel_steps(steps, name: str = "kernel_steps") -> int:
+    """``steps`` as an int, or a ValueError naming ``name`` when it is not an integer >= :data:`MIN_KERNEL_STEPS`."""
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < MIN_KERNEL_STEPS:
+        raise ValueError(f"{name} must be an integer >= {MIN_KERNEL_STEPS} (a shorter kernel leaves the encoder "
+                         f"terms ~ e / T^2 at their largest), got {steps!r}")
+    return int(steps)
+
+
+def kernel_family(n_samples: int, dt: float, stride: int = 1, *, even: bool = False) -> KernelFamily:
+    """The kernel family of a log of ``n_samples`` samples every ``dt`` [s] (module docstring); ``even``: even
+    lengths only (a triangle's apex on a sample); ``stride`` : the stated row stride [samples] of the shortest."""
+    if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
+        raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
+    hi = max(MIN_KERNEL_STEPS, min(int(round(LONGEST_S / dt)), (n_samples - 1) // 10))
+    lo = max(MIN_KERNEL_STEPS, min(int(round(SHORTEST_S / dt)), hi))
+    steps: list[int] = []
+    L = float(lo)
     while L <= hi * (1 + 1e-9):
         k = int(round(L))
         k += (k % 2) if even else 0
-        if not out or k > out[-1]:
-            out.append(k)
-        L *= 1.6
-    return out
-
-
-def sample_starts(n_samples: int, steps: int, count: int = SAMPLE_WINDOWS, margin: int = 0) -> np.ndarray:
-    """``count`` window starts spread evenly over the log for a kernel of ``steps`` steps (``margin`` samples kept
-    free at both ends, e.g. a speed secant's half-span)."""
-    last = n_samples - 1 - steps - margin
-    if last < margin:
-        return np.zeros(0, dtype=np.int64)
-    return np.unique(np.linspace(margin, last, count).round().astype(np.int64))
-
-
-def relative_radius(Wc, D, bound, theta_abs) -> np.ndarray:
-    """(m,) the relative row radius ``(bound + D |theta|) / (|Wc| |theta|)`` (inf where a row has no signal)."""
-    t = np.abs(np.asarray(theta_abs, dtype=float))
-    signal = np.abs(np.asarray(Wc, dtype=float)) @ t
-    radius = np.asarray(bound, dtype=float) + np.asarray(D, dtype=float) @ t
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(signal > 0, radius / signal, np.inf)
-
-
-def choose_kernel(evaluate, candidates, theta_abs, progress=None) -> KernelChoice:
-    """The candidate kernel length of least median relative row radius (module docstring).
-
-    evaluate : ``f(steps) -> (Wc, D, bound)`` the certified equation's rows for a kernel of ``steps`` steps on the
-    rule's window sample (the caller keeps the sample the same for every candidate); candidates : lengths
-    [steps]; theta_abs : (p,) the prior's largest magnitudes; progress : callable(done, total) or None.
-    """
-    candidates = [int(c) for c in candidates]
-    if not candidates:
-        raise ValueError("candidates must hold at least one kernel length, got none")
-    scores = {}
-    for i, L in enumerate(candidates):
-        Wc, D, bound = evaluate(L)
-        rho = relative_radius(Wc, D, bound, theta_abs)
-        scores[L] = float(np.median(rho)) if rho.size else math.inf
-        if progress is not None:
-            progress(i + 1, len(candidates))
-    best = min(candidates, key=lambda L: (scores[L], L))
-    rule = ("kernel length of least median relative row radius (bound + D|theta|) / (|Wc||theta|) at the prior's "
-            "largest |theta|, over the candidates, on the same sample of windows")
-    return KernelChoice(steps=best, scores=scores, rule=rule, sampled_windows=SAMPLE_WINDOWS)
-
-
-def minimum_kernel_steps(dt: float, min_seconds: float = 0.0) -> int:
-    """The shortest kernel accepted [steps]: :data:`MIN_KERNEL_STEPS`, or ``min_seconds`` of samples if longer."""
-    return max(MIN_KERNEL_STEPS, int(math.ceil(min_seconds / dt - 1e-9)))
+        if not steps or k > steps[-1]:
+            steps.append(k)
+        L *= FACTOR
+    return KernelFamily(steps=tuple(steps), strides=tuple(max(stride, k // STRIDE_DIVISOR) for k in steps))

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.processing.errorspec import ErrorSpec
-from h4bench.ident.processing.choice import MIN_KERNEL_STEPS, candidate_lengths, choose_kernel, sample_starts
-from h4bench.ident.processing.weakform import (NonlinearSteps, RowWindows, coulomb_columns, imot_columns,
+from h4bench.ident.processing.choice import check_kernel_steps, kernel_family
+from h4bench.ident.processing.weakform import (NonlinearSteps, coulomb_columns, imot_columns,
                                                make_kernel, nonlinear_rows, nonlinear_steps, row_windows,
                                                torque_rows, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
@@ -134,42 +134,52 @@ def curvature_bounds(geometry, q, h: float, every: int = 10, factor: float = CUR
 
 
 def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing | None = None,
-                       position_error=None, prior_abs=2.0) -> CertifiedEquation:
+                       position_error=None) -> CertifiedEquation:
     """The H4's derived interval equation of a log: q (n, 4) measured positions [rad], tau (n, 4) logged torques
     [N m] (held over each step, or the torque at each sample instant: ``spec.torque_timing``), spec the error
     specification (4 joints).
 
-    processing : the weak form's settings; ``kernel_steps = None`` (the default) chooses the kernel length from the
-    specification and the measured positions (:func:`ident.processing.choice.choose_kernel`: the length of least
-    median relative row radius at ``prior_abs``; ``info["kernel_choice"]`` says which and why); an explicit
-    length wins, and one below :data:`ident.processing.choice.MIN_KERNEL_STEPS` is refused.
+    processing : the weak form's settings; ``kernel_steps = None`` (the default) stacks the rows of every kernel
+    of :func:`ident.processing.choice.kernel_family` (one true interval equation; ``info["kernels"]``); an
+    explicit length gives that kernel's rows alone, and one under
+    :data:`ident.processing.choice.MIN_KERNEL_STEPS` is refused.
     position_error : (n, 4) bounds of the position error [rad]; default ``spec.position_error(q)`` (0 gives the
     equation of exact positions, used by the certificate to check the truncation terms alone).
-    prior_abs : scalar or (14,) the prior's largest parameter magnitudes (the paper's prior [0, 2]: 2), read by the
-    kernel choice only.
     """
     processing = processing or Processing()
     q = np.asarray(q, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if q.ndim != 2 or q.shape[1] != N_JOINTS or tau.shape != q.shape:
         raise ValueError(f"q and tau must have the same shape (n, {N_JOINTS}), got {q.shape} and {tau.shape}")
-    steps = certified_steps(geometry, q, spec, processing, position_error)
     h = spec.sample_period
-    info = {}
-    L = processing.kernel_steps
-    if L is None:
-        choice = _choose(steps, processing, prior_abs)
-        L = choice.steps
-        info["kernel_choice"] = choice.to_dict()
-    elif isinstance(L, bool) or not isinstance(L, (int, np.integer)) or L < MIN_KERNEL_STEPS:
-        raise ValueError(f"processing.kernel_steps must be an integer >= {MIN_KERNEL_STEPS} (shorter kernels leave "
-                         f"the encoder terms at their largest), or None to choose it, got {L!r}")
-    kernel = make_kernel(int(L), h, processing.kernel_shape)
-    windows = row_windows(q.shape[0], int(L), processing.stride)
-    eq = certified_rows(steps, kernel, windows, tau)
+    if processing.kernel_steps is None:
+        family = kernel_family(q.shape[0], h, processing.stride)
+        pairs = list(zip(family.steps, family.strides))
+    else:
+        pairs = [(check_kernel_steps(processing.kernel_steps, "processing.kernel_steps"), processing.stride)]
+    steps = certified_steps(geometry, q, spec, processing, position_error)
+    eqs = [certified_rows(steps, make_kernel(L, h, processing.kernel_shape), row_windows(q.shape[0], L, st), tau)
+           for L, st in pairs]
+    eq = eqs[0] if len(eqs) == 1 else _stack(eqs)
     eq.info.update(kernel_shape=processing.kernel_shape, stride=processing.stride,
-                   curvature_every=processing.curvature_every, **info)
+                   curvature_every=processing.curvature_every)
+    if processing.kernel_steps is None:
+        eq.info["kernels"] = family.to_dict()
     return eq
+
+
+def _stack(eqs: list[CertifiedEquation]) -> CertifiedEquation:
+    """One interval equation of the rows of several (each is true on its own, so all are at once)."""
+    first = eqs[0]
+    info = dict(first.info)
+    info.update(kernel_steps=None, rows=sum(e.info["rows"] for e in eqs), windows=sum(e.info["windows"] for e in eqs),
+                kernel_l1=max(e.info["kernel_l1"] for e in eqs),
+                sign_uncertain_steps=first.info["sign_uncertain_steps"])
+    return CertifiedEquation(Wc=np.vstack([e.Wc for e in eqs]), D=np.vstack([e.D for e in eqs]),
+                             y=np.concatenate([e.y for e in eqs]), bound=np.concatenate([e.bound for e in eqs]),
+                             sample=np.concatenate([e.sample for e in eqs]),
+                             joint=np.concatenate([e.joint for e in eqs]), info=info, names=first.names,
+                             terms={k: np.concatenate([e.terms[k] for e in eqs]) for k in first.terms})
 
 
 @dataclass(frozen=True)
@@ -273,25 +283,6 @@ def _regressor_columns(steps: CertifiedSteps, kernel, windows):
     cols["truncation"][..., 4:6] = trunc
     cols["second_order"][..., 4:6] = second
     return cols, sign_uncertain
-
-
-def _choose(steps: CertifiedSteps, processing: Processing, prior_abs):
-    """The kernel length of least median relative row radius (:func:`ident.processing.choice.choose_kernel`) on an
-    evenly spread sample of windows; reads the positions and the specification, never the torques."""
-    n, h = steps.q.shape[0], steps.spec.sample_period
-    theta_abs = np.broadcast_to(np.abs(np.asarray(prior_abs, dtype=float)), (len(PARAMETER_NAMES),))
-
-    def evaluate(L):
-        kernel = make_kernel(L, h, processing.kernel_shape)
-        windows = RowWindows(start=sample_starts(n, L), steps=L)
-        cols, _ = _regressor_columns(steps, kernel, windows)
-        D = sum(cols[k] for k in ("measurement", "truncation", "second_order", "sign"))
-        torque, model = _torque_side_bound(steps.spec, kernel.l1)
-        R = windows.start.size
-        return (cols["value"].reshape(-1, len(PARAMETER_NAMES)), D.reshape(-1, len(PARAMETER_NAMES)),
-                np.tile(torque + model, R))
-
-    return choose_kernel(evaluate, candidate_lengths(n, h, even=False), theta_abs)
 
 
 def certified_rows(steps: CertifiedSteps, kernel, windows, tau) -> CertifiedEquation:

@@ -1,73 +1,46 @@
-"""The certified equation's processing chosen from the specification (:mod:`ident.processing.choice`).
+"""The certified equation's kernels from the specification (:mod:`ident.processing.choice`).
 
-Oracles: a naive loop for the relative row radius; a synthetic score function whose minimum is known; the H4's
-certified equation evaluated directly at every candidate (the rule's score recomputed outside the rule)."""
+Oracles: the family's stated grid; the H4's certified equation of each kernel alone (the family's rows must be
+exactly theirs, stacked); the Oettli-Prager hull of each kernel alone (the family's box lies inside each)."""
 
 import numpy as np
 import pytest
 
-from h4bench import sim
-from h4bench.ident.processing.choice import (MIN_KERNEL_STEPS, candidate_lengths, choose_kernel, relative_radius,
-                                             sample_starts)
+from h4bench import ident, sim
+from h4bench.ident.processing.choice import MIN_KERNEL_STEPS, STRIDE_DIVISOR, check_kernel_steps, kernel_family
 from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.robots import h4_certified as hc
 
 
-def test_candidate_lengths_grid():
-    c = candidate_lengths(12001, 1e-3)
-    assert c[0] == 40 and c[-1] <= 800 and all(b > a for a, b in zip(c, c[1:]))
-    assert all(L % 2 == 0 for L in c)
-    assert all(1.4 < b / a < 1.8 for a, b in zip(c, c[1:]))  # geometric, factor ~1.6
-    short = candidate_lengths(1001, 1e-3, even=False)  # at most a tenth of the log
-    assert max(short) <= 100 and min(short) >= MIN_KERNEL_STEPS
-    assert candidate_lengths(101, 1e-3) == [MIN_KERNEL_STEPS]  # a short log keeps the shortest accepted kernel
+def test_kernel_family_grid():
+    f = kernel_family(12001, 1e-3, 2, even=True)
+    assert f.steps[0] == 40 and f.steps[-1] <= 800 and all(b > a for a, b in zip(f.steps, f.steps[1:]))
+    assert all(L % 2 == 0 for L in f.steps)
+    assert all(1.4 < b / a < 1.8 for a, b in zip(f.steps, f.steps[1:]))  # geometric, factor ~1.6
+    assert f.strides == tuple(max(2, L // STRIDE_DIVISOR) for L in f.steps)
+    short = kernel_family(1001, 1e-3)  # at most a tenth of the log
+    assert max(short.steps) <= 100 and min(short.steps) >= MIN_KERNEL_STEPS
+    assert kernel_family(101, 1e-3).steps == (MIN_KERNEL_STEPS,)  # a short log keeps the shortest accepted kernel
+    assert kernel_family(4001, 2e-4).steps[0] == 200  # the same durations at another sample rate
+    with pytest.raises(ValueError, match="stride must be an integer >= 1, got 0"):
+        kernel_family(1000, 1e-3, 0)
 
 
-def test_sample_starts_spread_inside_the_log():
-    s = sample_starts(5000, 400, count=24, margin=3)
-    assert s.size == 24 and s[0] == 3 and s[-1] == 5000 - 1 - 400 - 3
-    assert np.all(np.diff(s) > 0)
-    assert sample_starts(100, 400).size == 0
-
-
-def test_relative_radius_against_a_loop():
-    rng = np.random.default_rng(0)
-    Wc, D = rng.normal(size=(30, 5)), rng.uniform(0, 0.1, (30, 5))
-    b, t = rng.uniform(0.1, 1, 30), rng.uniform(-2, 2, 5)
-    Wc[3] = 0.0
-    got = relative_radius(Wc, D, b, t)
-    for k in range(30):
-        sig = sum(abs(Wc[k, j]) * abs(t[j]) for j in range(5))
-        rad = b[k] + sum(D[k, j] * abs(t[j]) for j in range(5))
-        assert got[k] == (np.inf if sig == 0 else pytest.approx(rad / sig, rel=1e-14))
-
-
-def test_choose_kernel_takes_the_least_median_score_and_the_shorter_on_a_tie():
-    calls = []
-
-    def evaluate(L):  # relative radius (1 + (L - 90)^2 / 1e3) / 10 on every row: least at L = 90
-        calls.append(L)
-        rho = 1.0 + (L - 90) ** 2 / 1e3
-        return np.ones((8, 2)), np.zeros((8, 2)), np.full(8, rho)
-
-    ch = choose_kernel(evaluate, [40, 64, 90, 130, 200], np.ones(2))
-    assert calls == [40, 64, 90, 130, 200]
-    assert ch.steps == 90 and ch.scores[90] == pytest.approx(0.5)
-    assert ch.to_dict()["scores"]["90"] == pytest.approx(0.5)
-    tie = choose_kernel(lambda L: (np.ones((4, 1)), np.zeros((4, 1)), np.ones(4)), [60, 30], np.ones(1))
-    assert tie.steps == 30
-    with pytest.raises(ValueError, match="candidates must hold at least one"):
-        choose_kernel(evaluate, [], np.ones(2))
+def test_check_kernel_steps_names_the_argument():
+    assert check_kernel_steps(40) == 40
+    for bad in (7, 19, 2.5, True, "40"):
+        with pytest.raises(ValueError, match=r"kernel_steps must be an integer >= 20 .* got"):
+            check_kernel_steps(bad)
 
 
 @pytest.fixture(scope="module")
 def h4_log():
-    """A short H4 motion (sines within the workspace), quantised to 2^16 counts; torques are not read by the rule
-    (zeros)."""
+    """A short H4 motion about home (sines), quantised to 2^16 counts; torques of a uniform-noise-free toy
+    (zeros: the rows' left side is not what is checked here)."""
     geometry = sim.H4Geometry.from_model(sim.load_model())
     h = 1e-3
-    t = np.arange(1201) * h
-    q0 = sim.inverse_kinematics(geometry, np.array([0.0, 0.0, -0.55, 0.0]))
+    t = np.arange(701) * h
+    q0 = sim.inverse_kinematics(geometry, np.array([0.0, 0.0, -0.55, 0.0]))  # home pose (trajectories.limits)
     q = q0 + 0.05 * np.sin(2 * np.pi * np.array([1.1, 1.7, 2.3, 1.3]) * t[:, None] + np.arange(4))
     res = 2 * np.pi / 2**16
     spec = ErrorSpec(n_joints=4, sample_period=h, position_resolution=res, torque_error=1.0, qd_max=3.0,
@@ -75,24 +48,41 @@ def h4_log():
     return geometry, np.round(q / res) * res, spec
 
 
-def test_h4_chooses_the_rules_argmin_and_refuses_short_kernels(h4_log):
+def test_h4_family_stacks_each_kernels_rows(h4_log):
     geometry, q, spec = h4_log
-    tau = np.zeros_like(q)
-    eq = hc.certified_equation(geometry, q, tau, spec, hc.Processing(stride=10))
-    ch = eq.info["kernel_choice"]
-    scores = {int(k): v for k, v in ch["scores"].items()}
-    assert eq.info["kernel_steps"] == ch["steps"] == min(scores, key=lambda k: (scores[k], k))
-    # the score recomputed outside the rule, from the equation of the same sample of windows
-    steps = hc.certified_steps(geometry, q, spec, hc.Processing())
-    L = ch["steps"]
-    from h4bench.ident.processing.weakform import RowWindows, make_kernel
-
-    windows = RowWindows(start=sample_starts(q.shape[0], L), steps=L)
-    rows = hc.certified_rows(steps, make_kernel(L, spec.sample_period), windows, tau)
-    assert np.median(relative_radius(rows.Wc, rows.D, rows.bound, np.full(14, 2.0))) == pytest.approx(
-        scores[L], rel=1e-9)
-    # an explicit length wins and gives the rows of that kernel
-    fixed = hc.certified_equation(geometry, q, tau, spec, hc.Processing(kernel_steps=50, stride=10))
-    assert fixed.info["kernel_steps"] == 50 and "kernel_choice" not in fixed.info
-    with pytest.raises(ValueError, match=r"kernel_steps must be an integer >= 10 .* got 7"):
+    tau = np.cos(np.arange(q.size)).reshape(q.shape)
+    eq = hc.certified_equation(geometry, q, tau, spec, hc.Processing(stride=3))
+    fam = kernel_family(q.shape[0], spec.sample_period, 3)
+    assert eq.info["kernels"]["steps"] == list(fam.steps) and len(fam.steps) >= 2
+    rows = 0
+    for L, st in zip(fam.steps, fam.strides):  # oracle: each kernel alone, as an explicit setting gives it
+        one = hc.certified_equation(geometry, q, tau, spec, hc.Processing(kernel_steps=L, stride=st))
+        assert one.info["kernel_steps"] == L and "kernels" not in one.info
+        sl = slice(rows, rows + len(one))
+        for name in ("Wc", "D", "y", "bound", "sample", "joint"):
+            np.testing.assert_array_equal(getattr(eq, name)[sl], getattr(one, name))
+        for k, v in one.terms.items():
+            np.testing.assert_array_equal(eq.terms[k][sl], v)
+        rows += len(one)
+    assert rows == len(eq) == eq.info["rows"]
+    with pytest.raises(ValueError, match=r"processing.kernel_steps must be an integer >= 20 .* got 7"):
         hc.certified_equation(geometry, q, tau, spec, hc.Processing(kernel_steps=7))
+
+
+def test_h4_family_box_lies_in_every_single_kernels_box(h4_log):
+    """The family's set is the intersection of the single kernels' sets: its hull lies in each one's hull (to the
+    hulls' outward rounding). Torques within 0.5 N m of 0 (theta = 0 lies in every set: none is empty)."""
+    geometry, q, spec = h4_log
+    tau = np.random.default_rng(0).uniform(-0.5, 0.5, q.shape)
+    prior = ident.Box(np.zeros(14), np.full(14, 2.0))
+    eq = hc.certified_equation(geometry, q, tau, spec, hc.Processing(stride=3))
+
+    def box(e):
+        return ident.estimate(e.Wc, e.y, e.bound, prior, method="certified", regressor_radius=e.D,
+                              groups=e.joint.astype(np.int64), check_consistency=False)
+
+    fam_box = box(eq)
+    for L, st in zip(eq.info["kernels"]["steps"], eq.info["kernels"]["strides"]):
+        one = box(hc.certified_equation(geometry, q, tau, spec, hc.Processing(kernel_steps=L, stride=st)))
+        slack = 1e-7 * (prior.upper - prior.lower)
+        assert np.all(fam_box.lower >= one.lower - slack) and np.all(fam_box.upper <= one.upper + slack)
