@@ -94,6 +94,7 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
     g0, f0, ha, pair, Mc, gk, fk, Mk, Vp, Vm = out.values()
     for c in range(C):
         qq, v = qh[c], vh[c]
+        vp, vm = v + I, v - I  # rows b: v + e_b, v - e_b
         g0[c] = Y(model, data, qq, Z, Z)
         f0[c] = Y(model, data, qq, v, Z)
         for a in range(n):
@@ -108,9 +109,21 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
             fk[c, k] = Y(model, data, qk, v, Z)
             for b in range(n):
                 Mk[c, k, b] = Y(model, data, qk, Z, I[b])
-                Vp[c, k, b] = Y(model, data, qk, v + I[b], Z)
-                Vm[c, k, b] = Y(model, data, qk, v - I[b], Z)
+                Vp[c, k, b] = Y(model, data, qk, vp[b], Z)
+                Vm[c, k, b] = Y(model, data, qk, vm[b], Z)
     return out
+
+
+def _bound(d, c, mag, flt):
+    """``|d| + c + flt (mag + |d| ETA)`` evaluated in that order, overwriting d (with ``mag + x`` as ``x + mag``:
+    the same float)."""
+    a = np.abs(d, out=d)
+    t = a * ETA
+    t += mag
+    t *= flt
+    a += c
+    a += t
+    return a
 
 
 def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
@@ -134,18 +147,24 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     Jv = 2 * np.einsum("sabic,sb->saic", gam, vh)  # exact: h is quadratic in v
     mag = np.abs(f0) + np.abs(g0)
     Jq = (p["fk"] - f0[:, None]) / eta
-    dM = (p["Mk"] - p["gk"][:, :, None] - Mc[:, None]) / eta
-    dJv = (0.5 * (p["Vp"] - p["Vm"]) - Jv[:, None]) / eta  # (s, k, a, i, c)
-    del p
+    # in place, the reference's operations in its order: dM = (Mk - gk - Mc) / eta, only |dM| is read
+    dM = p["Mk"]
+    dM -= p["gk"][:, :, None]
+    dM -= Mc[:, None]
+    dM /= eta
+    dJv = p["Vp"]  # (s, k, a, i, c): (0.5 (Vp - Vm) - Jv) / eta, only |dJv| is read
+    dJv -= p["Vm"]
+    dJv *= 0.5
+    dJv -= Jv[:, None]
+    dJv /= eta
     flt = 4 * PIN_REL / eta
     # bounds on the true derivatives (forward-difference truncation by Bernstein, pinocchio's float error)
     vs = np.sum(np.abs(vh), axis=1)
     c4 = (slice(None),) + (None,) * 3
     JqB = np.abs(Jq) + (eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]))[c4] + flt * (mag[:, None] + np.abs(Jq) * eta)
-    dMB = np.abs(dM) + 2 * eta * geo["M"] + flt * (2 + np.abs(dM) * eta)
-    dJvB = (np.abs(dJv) + (4 * eta * geo["gamma"] * (vs + 1))[c4 + (None,)]
-            + flt * (2 * mag[:, None, None] + np.abs(dJv) * eta))
-    del Jq, dM, dJv
+    dMB = _bound(dM, 2 * eta * geo["M"], 2.0, flt)  # |dM| + 2 eta M + flt (2 + |dM| eta)
+    dJvB = _bound(dJv, (4 * eta * geo["gamma"] * (vs + 1))[c4 + (None,)], 2 * mag[:, None, None], flt)
+    del p, Jq, dM, dJv
     # speeds and position boxes of the step (true motion)
     ebar = grid.ebar[J]
     ev_max = grid.ev_mot_max + grid.ev_pos[J]
@@ -247,12 +266,11 @@ def _view(arr, first, count: int, stride: int, length: int):
 def _shift_diff_sum(T, ew, d: int):
     """``sum_o sum_a |G[o, a, :]| ew[o, a]`` per window for ``G[o] = [o >= d] T[o - d] - [o < L] T[o]``
     (o < L + d) and T (R, L, n, F), ew (R, L + d, n): the reference's ``|G|`` entry by entry (the same
-    differences), contracted by BLAS. Returns (R, F)."""
-    R, L = T.shape[:2]
-    F = T.shape[-1]
+    differences). Returns (R, F)."""
+    L = T.shape[1]
 
     def contract(absg, e):
-        return np.matmul(e.reshape(R, 1, -1), absg.reshape(R, -1, F))[:, 0]
+        return np.einsum("roa,roaf->rf", e, absg)
 
     lo = min(d, L)
     out = contract(np.abs(T[:, :lo]), ew[:, :lo])  # G = -T[o]
@@ -317,7 +335,7 @@ def _pair_terms(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: int,
     Y = V("g0") + K1[:, None] * V("fg")
     Y += np.matmul(u[:, :, None, :], V("Mc"))[:, :, 0]
     out = {"Wi": Y.sum(axis=1), "mag": np.abs(Y, out=Y).sum(axis=1)}
-    out["rsum"] = np.matmul(np.abs(u).reshape(R, 1, L * n), V("aMc").reshape(R, L * n, F))[:, 0]
+    out["rsum"] = np.einsum("rlb,rlbf->rf", np.abs(u), V("aMc"))
     # h at the measured speed estimate: sum_j K1_j Jv_j (delta_{j+m} - delta_{j+1-m}) / S, summed by parts
     out["cG"] = _shift_diff_sum(K1[:, None, None] * V("Jv"), _view(grid.e, int(starts[0]) + 1 - m, R, stride,
                                                                       L + 2 * m - 1), 2 * m - 1) / grid.S
