@@ -43,9 +43,14 @@ halves of such derivatives: ``|Gamma| <= 3 (1 + R^2)``, hence ``|h| <= 3 (1 + R^
 ``|g| <= |g0| sqrt(1 + R^2)``, ``|dg/dq_k| <= 2 |g0| sqrt(1 + R^2)``. These are global (any configuration), hence
 loose, but they only multiply ``dt``, e and the speed-estimate error. Columns of link i vanish on the rows of
 joints after i (structural zeros keep radius 0). **Stated, not proven**: pinocchio's floating-point error
-(taken below ``1e-12`` of the magnitudes summed, in ``rounding``), and the spec's own assumptions (the motion
+(taken below ``1e-12`` of the magnitudes summed, in ``float``), and the spec's own assumptions (the motion
 bounds, the torque error, the inter-sample torque for sample timing without a ``torque_rate``: within
 ``torque_error`` of the interpolation of the samples).
+
+**Evaluation** (:mod:`ident.robots.serial_steps`): pinocchio at each step's own arguments, each step once; the
+regressor at a window's scaled speed and acceleration rebuilt from them (``Y`` is affine in the acceleration and
+quadratic in the speed), whose rounding bound is added to ``float``; window sums for all windows at once. The
+previous per-window evaluation stays as the reference (``reference=True``, :mod:`ident.robots.serial_reference`).
 
 Base parameters: the rows of the standard regressor satisfy the structural dependences exactly (every
 evaluation is one of the regressor's), so the base columns are the independent standard ones and their radii

@@ -9,43 +9,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident.robots.serial_steps import PARTS, PIN_REL as _PIN_REL
+from h4bench.ident.robots.serial_steps import PARTS, StepGrid
+from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
 __all__ = ["inertial_rows_reference"]
 
 
-def _mid(x):
-    return 0.5 * (x[:-1] + x[1:])
-
-
-class _Steps:
+class _Steps(StepGrid):
     """Per-step local data at the measured mid-step position ``qh`` and speed estimate ``vh`` (pinocchio
     evaluations, cached): the gravity columns, the mass-matrix columns, and the radii aggregates per row entry
     (n rows, pi inertial columns) of the module docstring's local bounds. Step j spans ``[t_j, t_j+1]``; the
-    sample-instant aggregates of sample j use steps j-1 and j."""
+    sample-instant aggregates of sample j use steps j-1 and j. The log's secants: :class:`StepGrid`."""
 
     ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded below)
 
     def __init__(self, robot, geo, q, e, dt, qdm, qddm, m):
-        self.robot, self.geo, self.q, self.e, self.dt, self.qdm, self.qddm, self.m = robot, geo, q, e, dt, qdm, qddm, m
-        n = robot.n_joints
-        N = q.shape[0]
-        self.n, self.N = n, N
-        self.S = (2 * m - 1) * dt
-        self.qbar, self.ebar, self.dq = _mid(q), _mid(e), np.diff(q, axis=0)
-        self.vh = np.full((N - 1, n), np.nan)
-        js = np.arange(m - 1, N - m)
-        self.vh[js] = (q[js + m] - q[js + 1 - m]) / self.S
-        self.ev_pos = np.full((N - 1, n), np.inf)
-        self.ev_pos[js] = (e[js + m] + e[js + 1 - m]) / self.S
-        self.ev_mot_max = qddm * (dt / 2 + self.S / 4)  # max over the step of |qd(t) - qd_true secant|
-        self.ev_mot_mean = qddm * (dt / 4 + self.S / 4)  # its k-weighted mean over the step
-        self.w = np.full((N, n), np.nan)
-        ks = np.arange(m, N - m)
-        self.w[ks] = (q[ks + m] - q[ks - m]) / (2 * m * dt)
-        self.ew_mot = qddm * (m * dt / 2)
-        self.ew_pos = np.full((N, n), np.inf)
-        self.ew_pos[ks] = (e[ks + m] + e[ks - m]) / (2 * m * dt)
+        super().__init__(q, e, dt, qddm, m)
+        self.robot, self.geo, self.qdm = robot, geo, qdm
         self.cache: dict = {}
 
     def evict(self, below: int) -> None:
