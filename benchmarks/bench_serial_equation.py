@@ -4,8 +4,8 @@ A 12 s, 1 kHz log of an analytic sum-of-sines motion (exact q, qd, qdd and exact
 ``tests/ident/test_serial_certified.py``), torques ``robot.regressor(q, qd, qdd) @ theta`` at the sample
 instants, positions rounded to 2^17 counts per turn. For each kernel (80, 200, 400 steps) at stride 20: the
 vectorised equation against the per-window reference (``reference=True``, the previous implementation) in the
-same run, medians over repeats, their ratio, the largest difference of their outputs (over each output's largest
-entry) and the memory peak of the vectorised one (tracemalloc in a separate run: numpy's allocations).
+same run, medians over repeats of the wall and the CPU time and their ratios, the largest difference of their
+outputs (over each output's largest entry) and the memory peak of the vectorised one (tracemalloc in a separate run: numpy's allocations).
 
     python benchmarks/bench_serial_equation.py --urdf PATH/ur5_robot.urdf [--urdf PATH/panda.urdf]
         [--seconds 12] [--kernels 80 200 400] [--stride 20] [--repeats 3] [--reference-repeats 1]
@@ -80,12 +80,15 @@ def synthetic_log(robot: SerialRobot, seconds: float, seed: int = 0):
 
 
 def _timed(fn, repeats: int):
-    times, out = [], None
+    """Medians of the wall and the CPU time of this process [s] (on a shared machine the CPU time is the steadier
+    measure of the work; both are reported), and the last result."""
+    wall, cpu, out = [], [], None
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         out = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), out
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return statistics.median(wall), statistics.median(cpu), out
 
 
 def _max_rel(a, b) -> float:
@@ -108,20 +111,23 @@ def run(urdf: Path, seconds: float, kernels, stride: int, repeats: int, ref_repe
     rows = []
     for L in kernels:
         kw = {"half_width": L // 2, "stride": stride}
-        t_new, new = _timed(lambda: certified_equation(robot, base, q, tau, spec, **kw), repeats)
+        t_new, c_new, new = _timed(lambda: certified_equation(robot, base, q, tau, spec, **kw), repeats)
         tracemalloc.start()  # a separate run: tracing slows the allocations down
         certified_equation(robot, base, q, tau, spec, **kw)
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        t_old, old = _timed(lambda: certified_equation(robot, base, q, tau, spec, reference=True, **kw), ref_repeats)
+        t_old, c_old, old = _timed(lambda: certified_equation(robot, base, q, tau, spec, reference=True, **kw),
+                                   ref_repeats)
         rows.append({"robot": urdf.stem, "joints": robot.n_joints, "base": len(base), "kernel": L, "stride": stride,
                      "rows": len(new), "new_s": t_new, "reference_s": t_old, "ratio": t_old / t_new,
+                     "new_cpu_s": c_new, "reference_cpu_s": c_old, "cpu_ratio": c_old / c_new,
                      "peak_MB": peak / 2**20, "max_rel_diff": _compare(new, old)})
         r = rows[-1]
         worst = max(r["max_rel_diff"].items(), key=lambda kv: kv[1])
-        print(f"{r['robot']:>12} n={r['joints']} kernel {L:>3} stride {stride}: {r['rows']} rows, new {t_new:.2f} s, "
-              f"reference {t_old:.2f} s, ratio {r['ratio']:.1f}x, peak {r['peak_MB']:.0f} MB, "
-              f"largest difference {worst[1]:.1e} ({worst[0]})", flush=True)
+        print(f"{r['robot']:>12} n={r['joints']} kernel {L:>3} stride {stride}: {r['rows']} rows, wall new {t_new:.1f} s"
+              f" reference {t_old:.1f} s ratio {r['ratio']:.1f}x; CPU new {c_new:.1f} s reference {c_old:.1f} s ratio "
+              f"{r['cpu_ratio']:.1f}x; peak {r['peak_MB']:.0f} MB; largest difference {worst[1]:.1e} ({worst[0]})",
+              flush=True)
     return rows
 
 
