@@ -1,0 +1,197 @@
+"""The per-window reference computation of a serial arm's certified equation (the previous implementation, kept
+as the oracle of :mod:`ident.robots.serial_steps`): per window and per sample step of it, one pinocchio regressor
+call at the window's scaled speed and acceleration, and the local bounds of each step (:class:`_Steps`, cached)
+evaluated one step at a time. Slow (a Python loop over windows x steps); the same numbers as the vectorised
+:func:`ident.robots.serial_steps.inertial_rows` up to floating-point rounding (tests/ident/test_serial_fast.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from h4bench.ident.robots.serial_steps import PARTS, StepGrid
+from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
+
+__all__ = ["inertial_rows_reference"]
+
+
+class _Steps(StepGrid):
+    """Per-step local data at the measured mid-step position ``qh`` and speed estimate ``vh`` (pinocchio
+    evaluations, cached): the gravity columns, the mass-matrix columns, and the radii aggregates per row entry
+    (n rows, pi inertial columns) of the module docstring's local bounds. Step j spans ``[t_j, t_j+1]``; the
+    sample-instant aggregates of sample j use steps j-1 and j. The log's secants: :class:`StepGrid`."""
+
+    ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded below)
+
+    def __init__(self, robot, geo, q, e, dt, qdm, qddm, m):
+        super().__init__(q, e, dt, qddm, m)
+        self.robot, self.geo, self.qdm = robot, geo, qdm
+        self.cache: dict = {}
+
+    def evict(self, below: int) -> None:
+        for j in [j for j in self.cache if j < below]:
+            del self.cache[j]
+
+    def get(self, j: int) -> dict:
+        if j not in self.cache:
+            self.cache[j] = self._compute(j)
+        return self.cache[j]
+
+    def _compute(self, j: int, with_prev: bool = True) -> dict:  # noqa: PLR0915 - one derivation, kept in one place
+        import pinocchio as pin
+
+        model, data, n, geo = self.robot.model, self.robot.data, self.n, self.geo
+        eta, dt = self.ETA, self.dt
+        qh, vh = self.qbar[j], self.vh[j]
+        Z = np.zeros(n)
+        I = np.eye(n)
+
+        def Y(qq, v, a):
+            return pin.computeJointTorqueRegressor(model, data, qq, v, a).copy()
+
+        g0 = Y(qh, Z, Z)
+        f0 = Y(qh, vh, Z)
+        ha = np.stack([Y(qh, I[a], Z) - g0 for a in range(n)])
+        gam = np.zeros((n, n) + g0.shape)
+        for a in range(n):
+            gam[a, a] = ha[a]
+            for b in range(a + 1, n):
+                gam[a, b] = gam[b, a] = 0.5 * (Y(qh, I[a] + I[b], Z) - g0 - ha[a] - ha[b])
+        Mc = np.stack([Y(qh, Z, I[b]) - g0 for b in range(n)])  # (b, i, c): column b of M per unit parameter
+        Jq = np.empty((n,) + g0.shape)
+        dM = np.empty((n, n) + g0.shape)
+        dJv = np.empty((n, n) + g0.shape)  # (k, a, i, c): d/dq_k of dh/dv_a at (qh, vh)
+        Jv = 2 * np.einsum("abic,b->aic", gam, vh)  # exact: h is quadratic in v
+        mag = np.abs(f0) + np.abs(g0)
+        for k in range(n):
+            qk = qh + eta * I[k]
+            gk = Y(qk, Z, Z)
+            Jq[k] = (Y(qk, vh, Z) - f0) / eta
+            for b in range(n):
+                dM[k, b] = (Y(qk, Z, I[b]) - gk - Mc[b]) / eta
+                dJv[k, b] = (0.5 * (Y(qk, vh + I[b], Z) - Y(qk, vh - I[b], Z)) - Jv[b]) / eta
+        flt = 4 * _PIN_REL / eta
+        # bounds on the true derivatives (forward-difference truncation by Bernstein, pinocchio's float error)
+        vs = float(np.sum(np.abs(vh)))
+        JqB = np.abs(Jq) + eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]) + flt * (mag + np.abs(Jq) * eta)
+        dMB = np.abs(dM) + 2 * eta * geo["M"] + flt * (2 + np.abs(dM) * eta)
+        dJvB = np.abs(dJv) + 4 * eta * geo["gamma"] * (vs + 1) + flt * (2 * mag + np.abs(dJv) * eta)
+        # speeds and position boxes of the step (true motion)
+        ebar = self.ebar[j]
+        ev_max = self.ev_mot_max + self.ev_pos[j]
+        sp = np.abs(vh) + ev_max  # bound on the true |qd| over the step
+        dq_mean = sp * dt / 4 + self.qddm * dt**2 / 8
+        dq_max = sp * dt / 2 + self.qddm * dt**2 / 8 + ebar
+        qddm = self.qddm
+        # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order
+        dMq = np.einsum("kbic,b->kic", dMB, qddm)
+        A_mot = np.einsum("kic,k->ic", dMq, dq_mean) + 4 * geo["M"] * qddm.sum() * dq_max.sum() ** 2
+        A_pos = np.einsum("kic,k->ic", dMq, ebar)
+        # (h + g)(q(t), qd(t)) against (h + g)(qh, vh): first order in q and v (local), the v-quadratic part
+        # exactly (local Christoffel symbols), the q-q and q-v second order with local d/dq of dh/dv and Bernstein
+        absJv = np.abs(Jv)
+        absG = np.abs(gam)
+        mot = self.ev_mot_max
+        Q_all = np.einsum("abic,a,b->ic", absG, ev_max, ev_max)
+        Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
+        dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
+        rem = (4 * (geo["gamma"] * float(sp.sum()) ** 2 + geo["g"]) * dqs * dqs
+               + np.einsum("kaic,k,a->ic", dJvB, dq_max, ev_max) + 2 * geo["gamma"] * dvs * dvs * dqs)
+        H_mot = (np.einsum("kic,k->ic", JqB, dq_mean) + np.einsum("aic,a->ic", absJv, self.ev_mot_mean) + Q_mm + rem)
+        # the speed estimate's measurement error enters through the row's exact gradient (window loop, "Jv")
+        H_pos = np.einsum("kic,k->ic", JqB, ebar) + (Q_all - Q_mm)
+        # |M(true mid) - M(qh)| per column b
+        dlt = np.einsum("kbic,k->bic", dMB, ebar) + 2 * geo["M"] * float(ebar.sum()) ** 2
+        out = {"g0": g0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "H_pos": H_pos,
+               "Cmax": dlt.max(axis=0),
+               "Dloc": np.einsum("bic,b->ic", dlt, np.abs(self.dq[j]) + self.e[j] + self.e[j + 1]),
+               "Ecur": np.einsum("bic,b->ic", np.abs(Mc), self.e[j]),
+               "mag": np.abs(g0), "Jv": Jv}
+        # sample j (between steps j-1 and j)
+        prev = self.cache.get(j - 1)
+        if prev is None and with_prev and j - 1 >= self.m - 1:
+            prev = self._compute(j - 1, with_prev=False)
+        if prev is not None:
+            dMhat = prev["Mc"] - Mc
+            dMj = np.abs(dMhat) + prev["dlt"] + dlt  # bound on |M_{j-1} - M_j| at the true positions
+            out["B_mot"] = np.einsum("bic,b->ic", dMj, self.ew_mot)
+            # the secant's measurement error times dMhat goes through the row's exact gradient (window loop);
+            # here its product with the difference between the true and the measured dM
+            out["B_pos"] = np.einsum("bic,b->ic", prev["dlt"] + dlt, self.ew_pos[j])
+            out["dMhat"] = dMhat
+            out["Eknot"] = np.einsum("bic,b->ic", np.abs(prev["Mc"]), self.e[j])
+            out["Ediff"] = np.einsum("bic,b->ic", np.abs(prev["Mc"] - Mc), self.e[j])
+        return out
+
+
+
+def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=None):
+    """The inertial columns' window sums, window by window (arguments and returns as
+    :func:`ident.robots.serial_steps.inertial_rows`; ``recon`` is 0: the regressor is pinocchio's own)."""
+    import pinocchio as pin
+
+    nj = robot.n_joints
+    N = q.shape[0]
+    dt = spec.sample_period
+    st_ = _Steps(robot, geo, q, e, dt, spec.qd_max, spec.qdd_max, m)
+    k, K1 = kern.knots, kern.integrals
+    L = k.size - 1
+    kp = np.diff(k) / dt
+    dkp = np.abs(np.diff(np.concatenate([[0.0], kp, [0.0]])))
+    R_ = len(starts)
+    ni = 10 * nj
+    Wi = np.zeros((R_, nj, ni))
+    mag = np.zeros((R_, nj, ni))
+    parts_i = {name: np.zeros((R_, nj, ni)) for name in PARTS}
+    model, data = robot.model, robot.data
+    vh, dq = st_.vh, st_.dq
+    for r, s in enumerate(starts):
+        st = slice(s, s + L)  # steps of the window
+        sm = slice(s, s + L + 1)  # samples of the window
+        st_.evict(s - 1)
+        kw = k[:, None] * st_.w[sm]  # (L+1, n)
+        x = kw[1:] - kw[:-1]
+        u = x - kp[:, None] * dq[st]  # (L, n)
+        vs = np.sqrt(K1)[:, None] * vh[st]
+        acc = np.zeros((nj, ni))
+        ab = np.zeros((nj, ni))
+        part = {name: np.zeros((nj, ni)) for name in PARTS}
+        xs = np.abs(x).sum(axis=1)
+        for jj in range(L):
+            j = s + jj
+            d = st_.get(j)
+            Yj = pin.computeJointTorqueRegressor(model, data, st_.qbar[j], vs[jj], u[jj])
+            acc += Yj + (K1[jj] - 1.0) * d["g0"]
+            ab += np.abs(Yj) + abs(K1[jj] - 1.0) * d["mag"]
+            part["mass_motion"] += K1[jj] * d["A_mot"]
+            part["coriolis_motion"] += K1[jj] * d["H_mot"]
+            part["speed_motion"] += k[jj] * d["B_mot"]
+            part["mass_position"] += K1[jj] * d["A_pos"] + d["Cmax"] * xs[jj] + abs(kp[jj]) * d["Dloc"]
+            part["coriolis_position"] += K1[jj] * d["H_pos"]
+            part["speed_position"] += k[jj] * d["B_pos"]
+            # measurement through the exact gradient of sum_j k'_j M_j dq_j (sample jj of the window)
+            part["gradient_position"] += (dkp[jj] * (d["Ecur"] if jj == 0 else d["Eknot"])
+                                          + (abs(kp[jj]) * d["Ediff"] if jj else 0.0))
+        # h at the measured speed estimate: sum_j K1_j Jv_j (delta_{j+m} - delta_{j+1-m}) / S, summed by parts
+        Wt = K1[:, None, None, None] * np.stack([st_.get(s + jj)["Jv"] for jj in range(L)])  # (L, a, i, c)
+        G = np.zeros((L + 2 * m - 1,) + Wt.shape[1:])
+        G[2 * m - 1: 2 * m - 1 + L] += Wt  # sample offset jj + m, stored from offset 1 - m
+        G[:L] -= Wt  # sample offset jj + 1 - m
+        eo = e[s + 1 - m: s + L + m]  # (L + 2m - 1, a)
+        part["coriolis_position"] += np.einsum("oaic,oa->ic", np.abs(G), eo) / st_.S
+        # the sample-instant secants w_j in sum_j k_j w_j (M_{j-1} - M_j): (delta_{j+m} - delta_{j-m}) / (2 m dt)
+        Wk = k[:, None, None, None] * np.stack([st_.get(s + jj)["dMhat"] for jj in range(L + 1)])  # (L+1, b, i, c)
+        G2 = np.zeros((L + 1 + 2 * m,) + Wk.shape[1:])
+        G2[2 * m:] += Wk  # sample offset jj + m, stored from offset -m
+        G2[:L + 1] -= Wk  # sample offset jj - m
+        part["speed_position"] += np.einsum("obic,ob->ic", np.abs(G2), e[s - m: s + L + m + 1]) / (2 * m * dt)
+        d_end = st_.get(s + L)  # sample s + L: the last boundary term |k'_{L-1}| |M_{L-1}| e_L
+        part["gradient_position"] += dkp[L] * d_end["Eknot"]
+        Wi[r], mag[r] = acc, ab
+        for name in PARTS:
+            parts_i[name][r] = part[name]
+        if progress is not None:
+            progress(r + 1, R_)
+    st_.evict(N)
+
+    return Wi, mag, np.zeros_like(mag), parts_i

@@ -1,0 +1,400 @@
+"""The inertial columns of a serial arm's certified equation, vectorised: per-step local bounds batched over sample
+steps, window sums for all windows at once (:mod:`ident.robots.serial_certified` derives the bounds; this module
+evaluates them).
+
+**Per step** j (``[t_j, t_j+1]``, mid-step position ``qh``, speed estimate ``vh``) pinocchio's regressor is called
+at ``qh`` and at ``qh + ETA e_k`` with the arguments of the module docstring of :mod:`ident.robots.serial_certified`
+(gravity, the speed estimate, unit speeds and accelerations: ``2 + 2 n + n (n - 1) / 2 + n (3 n + 2)`` calls,
+each step once); every other operation runs on arrays of many steps at once, in the same arithmetic as the
+per-step reference (:mod:`ident.robots.serial_reference`).
+
+**Per window** the regressor at the window's scaled speed and acceleration is not called again: ``Y(q, v, a) =
+g(q) + h(q, v) + M(q) a`` with ``h`` quadratic in v, so the reference's call ``Y(qh_j, sqrt(K_w) vh_j, u_w)`` is
+``g0_j + K_w (f0_j - g0_j) + sum_b Mc_j[b] u_w[b]`` from the step's ``g0 = Y(qh, 0, 0)``, ``f0 = Y(qh, vh, 0)``
+and mass-matrix columns ``Mc[b] = Y(qh, 0, e_b) - g0`` (an identity of the exact functions). Its arithmetic adds
+at most ``2 (n + 5) u`` of ``|g0| + K_w (|f0| + |g0|) + sum_b |Mc[b]| |u_w[b]|`` per (window, step) (``u =
+2^-53``: the n-term product, the difference ``f0 - g0``, two products and two sums), returned as ``recon`` (an
+upper bound, the sum's own rounding included) for the floating-point radius. Window sums are correlations of
+per-step arrays with kernel weights (matrix-vector products over strided views of the step arrays, no copies);
+the per-(window, step) arrays (the rebuilt regressor, the differences of kernel-weighted step arrays at two
+steps: the speed estimates' exact gradients) are formed for a few windows at a time (``memory`` bounds them).
+
+**Steps held**: the per-step arrays of the windows starting within about ``max(L, 256)`` steps, plus the
+``L + 2`` steps the next windows share (moved, not evaluated again): ``8 (max(L, 256) + L) (15 + 3 n) 10 n^2``
+bytes, 76 MB for 6 joints and 113 MB for 7 at L = 400.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import as_strided
+
+from h4bench.ident.numerics.interval import U, up
+from h4bench.ident.processing.weakform import Kernel
+
+__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_rows", "local_bounds"]
+
+ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
+PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
+# the inertial columns' radii by origin (``parts`` of the equation): M(q) within the step, Coriolis + gravity at the
+# mid-step estimate, the speed estimate in the differences of M, and the measurement's exact gradient
+PARTS = ("mass_motion", "coriolis_motion", "speed_motion", "mass_position", "coriolis_position", "speed_position",
+         "gradient_position")
+# per-step arrays of (n rows, 10 n columns) the window sums read, and the (n, n rows, 10 n columns) ones
+_KEEP = ("g0", "fg", "af0", "ag0", "A_mot", "A_pos", "H_mot", "H_pos", "Cmax", "Dloc", "Ecur", "B_mot", "B_pos",
+         "Eknot", "Ediff", "Mc", "aMc", "Jv")
+
+
+class StepGrid:
+    """The log's per-step and per-sample estimates (vectorised over the whole log).
+
+    q, e : (N, n) measured positions and their error bounds [rad]; dt [s]; qddm : (n,) stated |qdd| bound; m : the
+    secant half-span [steps]. Per step (N - 1 rows): ``qbar`` mid-step position, ``ebar`` its error, ``dq`` the
+    step, ``vh`` the speed secant over 2 m - 1 steps (NaN where it leaves the log), ``ev_pos`` its measurement
+    error; per sample (N rows): ``w`` the centred secant over 2 m steps, ``ew_pos`` its measurement error;
+    ``ev_mot_max``, ``ev_mot_mean``, ``ew_mot`` (n,) the secants' truncation bounds.
+    """
+
+    def __init__(self, q, e, dt, qddm, m):
+        n = q.shape[1]
+        N = q.shape[0]
+        self.q, self.e, self.dt, self.qddm, self.m, self.n, self.N = q, e, dt, qddm, m, n, N
+        self.S = (2 * m - 1) * dt
+        self.qbar, self.ebar, self.dq = 0.5 * (q[:-1] + q[1:]), 0.5 * (e[:-1] + e[1:]), np.diff(q, axis=0)
+        self.vh = np.full((N - 1, n), np.nan)
+        js = np.arange(m - 1, N - m)
+        self.vh[js] = (q[js + m] - q[js + 1 - m]) / self.S
+        self.ev_pos = np.full((N - 1, n), np.inf)
+        self.ev_pos[js] = (e[js + m] + e[js + 1 - m]) / self.S
+        self.ev_mot_max = qddm * (dt / 2 + self.S / 4)  # max over the step of |qd(t) - qd_true secant|
+        self.ev_mot_mean = qddm * (dt / 4 + self.S / 4)  # its k-weighted mean over the step
+        self.w = np.full((N, n), np.nan)
+        ks = np.arange(m, N - m)
+        self.w[ks] = (q[ks + m] - q[ks - m]) / (2 * m * dt)
+        self.ew_mot = qddm * (m * dt / 2)
+        self.ew_pos = np.full((N, n), np.inf)
+        self.ew_pos[ks] = (e[ks + m] + e[ks - m]) / (2 * m * dt)
+
+
+def _pinocchio_calls(robot, qh, vh) -> dict:
+    """The regressor evaluations of steps with mid positions qh (C, n) and speed estimates vh (C, n): each (C, ...)
+    with the regressor's (n, 10 n) last; ``ha``, ``pair``, ``Mc``, ``Mk``, ``Vp``, ``Vm`` before subtracting."""
+    import pinocchio as pin
+
+    Y = pin.computeJointTorqueRegressor
+    model, data = robot.model, robot.data
+    C, n = qh.shape
+    sh = (n, 10 * n)
+    Z, I = np.zeros(n), np.eye(n)
+    pairs = [(a, b, I[a] + I[b]) for a in range(n) for b in range(a + 1, n)]
+    shifts = [ETA * I[k] for k in range(n)]
+    out = {"g0": np.empty((C,) + sh), "f0": np.empty((C,) + sh), "ha": np.empty((C, n) + sh),
+           "pair": np.zeros((C, n, n) + sh), "Mc": np.empty((C, n) + sh), "gk": np.empty((C, n) + sh),
+           "fk": np.empty((C, n) + sh), "Mk": np.empty((C, n, n) + sh), "Vp": np.empty((C, n, n) + sh),
+           "Vm": np.empty((C, n, n) + sh)}
+    g0, f0, ha, pair, Mc, gk, fk, Mk, Vp, Vm = out.values()
+    for c in range(C):
+        qq, v = qh[c], vh[c]
+        vp, vm = v + I, v - I  # rows b: v + e_b, v - e_b
+        g0[c] = Y(model, data, qq, Z, Z)
+        f0[c] = Y(model, data, qq, v, Z)
+        for a in range(n):
+            ha[c, a] = Y(model, data, qq, I[a], Z)
+        for a, b, ab in pairs:
+            pair[c, a, b] = Y(model, data, qq, ab, Z)
+        for b in range(n):
+            Mc[c, b] = Y(model, data, qq, Z, I[b])
+        for k in range(n):
+            qk = qq + shifts[k]
+            gk[c, k] = Y(model, data, qk, Z, Z)
+            fk[c, k] = Y(model, data, qk, v, Z)
+            for b in range(n):
+                Mk[c, k, b] = Y(model, data, qk, Z, I[b])
+                Vp[c, k, b] = Y(model, data, qk, vp[b], Z)
+                Vm[c, k, b] = Y(model, data, qk, vm[b], Z)
+    return out
+
+
+def _bound(d, c, mag, flt):
+    """``|d| + c + flt (mag + |d| ETA)`` evaluated in that order, overwriting d (with ``mag + x`` as ``x + mag``:
+    the same float)."""
+    a = np.abs(d, out=d)
+    t = a * ETA
+    t += mag
+    t *= flt
+    a += c
+    a += t
+    return a
+
+
+def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
+    """The local data and radii aggregates of steps ``j0 .. j1 - 1`` (the per-step bounds of
+    :mod:`ident.robots.serial_certified`), each (C, n, 10 n) or (C, n, n, 10 n) for C = j1 - j0 steps:
+    ``g0``, ``f0``, ``Mc``, ``dlt``, ``A_mot``, ``A_pos``, ``H_mot``, ``H_pos``, ``Cmax``, ``Dloc``, ``Ecur``,
+    ``Jv`` (the same arithmetic as the per-step reference, batched)."""
+    J = np.arange(j0, j1)
+    eta, dt, n = ETA, grid.dt, grid.n
+    vh = grid.vh[J]
+    p = _pinocchio_calls(robot, grid.qbar[J], vh)
+    g0, f0 = p["g0"], p["f0"]
+    C = J.size
+    ha = p["ha"] - g0[:, None]
+    gam = np.zeros((C, n, n) + g0.shape[1:])
+    for a in range(n):
+        gam[:, a, a] = ha[:, a]
+        for b in range(a + 1, n):
+            gam[:, a, b] = gam[:, b, a] = 0.5 * (p["pair"][:, a, b] - g0 - ha[:, a] - ha[:, b])
+    Mc = p["Mc"] - g0[:, None]  # (s, b, i, c): column b of M per unit parameter
+    Jv = 2 * np.einsum("sabic,sb->saic", gam, vh)  # exact: h is quadratic in v
+    mag = np.abs(f0) + np.abs(g0)
+    Jq = (p["fk"] - f0[:, None]) / eta
+    # in place, the reference's operations in its order: dM = (Mk - gk - Mc) / eta, only |dM| is read
+    dM = p["Mk"]
+    dM -= p["gk"][:, :, None]
+    dM -= Mc[:, None]
+    dM /= eta
+    dJv = p["Vp"]  # (s, k, a, i, c): (0.5 (Vp - Vm) - Jv) / eta, only |dJv| is read
+    dJv -= p["Vm"]
+    dJv *= 0.5
+    dJv -= Jv[:, None]
+    dJv /= eta
+    flt = 4 * PIN_REL / eta
+    # bounds on the true derivatives (forward-difference truncation by Bernstein, pinocchio's float error)
+    vs = np.sum(np.abs(vh), axis=1)
+    c4 = (slice(None),) + (None,) * 3
+    JqB = np.abs(Jq) + (eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]))[c4] + flt * (mag[:, None] + np.abs(Jq) * eta)
+    dMB = _bound(dM, 2 * eta * geo["M"], 2.0, flt)  # |dM| + 2 eta M + flt (2 + |dM| eta)
+    dJvB = _bound(dJv, (4 * eta * geo["gamma"] * (vs + 1))[c4 + (None,)], 2 * mag[:, None, None], flt)
+    del p, Jq, dM, dJv
+    # speeds and position boxes of the step (true motion)
+    ebar = grid.ebar[J]
+    ev_max = grid.ev_mot_max + grid.ev_pos[J]
+    sp = np.abs(vh) + ev_max  # bound on the true |qd| over the step
+    qddm = grid.qddm
+    dq_mean = sp * dt / 4 + qddm * dt**2 / 8
+    dq_max = sp * dt / 2 + qddm * dt**2 / 8 + ebar
+    c3 = (slice(None), None, None)
+    # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order
+    dMq = np.einsum("skbic,b->skic", dMB, qddm)
+    A_mot = (np.einsum("skic,sk->sic", dMq, dq_mean)
+             + (4 * geo["M"] * qddm.sum() * np.sum(dq_max, axis=1) ** 2)[c3])
+    A_pos = np.einsum("skic,sk->sic", dMq, ebar)
+    # (h + g)(q(t), qd(t)) against (h + g)(qh, vh) (the reference's comments)
+    absG = np.abs(gam)
+    mot = grid.ev_mot_max
+    Q_all = np.einsum("sabic,sa,sb->sic", absG, ev_max, ev_max)
+    Q_mm = np.einsum("sabic,a,b->sic", absG, mot, mot)
+    dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
+    rem = ((4 * (geo["gamma"] * np.sum(sp, axis=1) ** 2 + geo["g"]) * dqs * dqs)[c3]
+           + np.einsum("skaic,sk,sa->sic", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
+    H_mot = (np.einsum("skic,sk->sic", JqB, dq_mean) + np.einsum("saic,a->sic", np.abs(Jv), grid.ev_mot_mean)
+             + Q_mm + rem)
+    H_pos = np.einsum("skic,sk->sic", JqB, ebar) + (Q_all - Q_mm)
+    dlt = np.einsum("skbic,sk->sbic", dMB, ebar) + (2 * geo["M"] * np.sum(ebar, axis=1) ** 2)[c4]
+    e = grid.e
+    return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot,
+            "H_pos": H_pos, "Cmax": dlt.max(axis=1),
+            "Dloc": np.einsum("sbic,sb->sic", dlt, np.abs(grid.dq[J]) + e[J] + e[J + 1]),
+            "Ecur": np.einsum("sbic,sb->sic", np.abs(Mc), e[J]), "Jv": Jv}
+
+
+def _sample_terms(grid: StepGrid, j0: int, cur: dict, Mc_prev, dlt_prev) -> dict:
+    """The sample-instant aggregates of samples j0 .. j0 + C - 1 (between steps j - 1 and j): ``dMhat``,
+    ``B_mot``, ``B_pos``, ``Eknot``, ``Ediff``; Mc_prev, dlt_prev : the two arrays of steps j0 - 1 .. j0 + C - 2."""
+    J = np.arange(j0, j0 + cur["Mc"].shape[0])
+    Mc, dlt = cur["Mc"], cur["dlt"]
+    dMhat = Mc_prev - Mc
+    dMj = np.abs(dMhat) + dlt_prev + dlt  # bound on |M_{j-1} - M_j| at the true positions
+    e = grid.e[J]
+    return {"dMhat": dMhat, "B_mot": np.einsum("sbic,b->sic", dMj, grid.ew_mot),
+            "B_pos": np.einsum("sbic,sb->sic", dlt_prev + dlt, grid.ew_pos[J]),
+            "Eknot": np.einsum("sbic,sb->sic", np.abs(Mc_prev), e),
+            "Ediff": np.einsum("sbic,sb->sic", np.abs(Mc_prev - Mc), e)}
+
+
+class _StepBuffer:
+    """The per-step arrays (:data:`_KEEP`) of the consecutive steps ``b0 .. b0 + size - 1``, flattened to
+    (steps, F) or (steps, n, F) with F = 10 n^2; :meth:`advance` drops the steps before a new first one and evaluates
+    the missing ones, ``batch`` steps per pinocchio batch."""
+
+    def __init__(self, robot, geo, grid: StepGrid, capacity: int, batch: int = 32):
+        self.robot, self.geo, self.grid, self.batch = robot, geo, grid, batch
+        n = grid.n
+        F = 10 * n * n
+        self.arr = {k: np.empty((capacity, n, F) if k in ("Mc", "aMc", "Jv") else (capacity, F)) for k in _KEEP}
+        self.b0, self.size = 0, 0
+        self.last_dlt = None  # (n, F): dlt of step b0 + size - 1 (for the next step's sample terms)
+
+    def advance(self, first: int, end: int) -> None:
+        """Hold steps ``first .. end - 1`` (first >= the held first step, end - first <= capacity)."""
+        keep = max(0, self.b0 + self.size - first) if self.size else 0
+        if keep and first > self.b0:
+            src = first - self.b0
+            for a in self.arr.values():
+                a[:keep] = a[src: src + keep]
+        self.b0, self.size = first, keep
+        for j0 in range(first + keep, end, self.batch):
+            j1 = min(end, j0 + self.batch)
+            cur = local_bounds(self.robot, self.geo, self.grid, j0, j1)
+            C = j1 - j0
+            Mc, dlt = cur["Mc"], cur["dlt"]
+            held = j0 - self.b0
+            if held:
+                Mc_prev = np.concatenate([self.arr["Mc"][held - 1: held].reshape((1,) + Mc.shape[1:]), Mc[:-1]])
+                dlt_prev = np.concatenate([self.last_dlt[None], dlt[:-1]])
+            else:  # no step before: the first step's sample terms are never read
+                Mc_prev = np.concatenate([np.full_like(Mc[:1], np.nan), Mc[:-1]])
+                dlt_prev = np.concatenate([np.full_like(dlt[:1], np.nan), dlt[:-1]])
+            cur.update(_sample_terms(self.grid, j0, {"Mc": Mc, "dlt": dlt}, Mc_prev, dlt_prev))
+            cur.update(fg=cur["f0"] - cur["g0"], af0=np.abs(cur["f0"]), ag0=np.abs(cur["g0"]), aMc=np.abs(Mc))
+            del cur["dMhat"]
+            for key, a in self.arr.items():
+                a[held: held + C] = cur[key].reshape((C,) + a.shape[1:])
+            self.last_dlt = dlt[-1]
+            self.size = held + C
+
+
+def _view(arr, first, count: int, stride: int, length: int):
+    """(count, length, ...) read-only view with ``[r, l] = arr[first + r stride + l]`` (no copy)."""
+    st = arr.strides
+    need = first + (count - 1) * stride + length
+    if first < 0 or need > arr.shape[0]:
+        raise IndexError(f"window view [{first}, {need}) outside the {arr.shape[0]} held rows")
+    return as_strided(arr[first:], shape=(count, length) + arr.shape[1:], strides=(stride * st[0],) + st,
+                      writeable=False)
+
+
+def _shift_diff_sum(T, ew, d: int):
+    """``sum_o sum_a |G[o, a, :]| ew[o, a]`` per window for ``G[o] = [o >= d] T[o - d] - [o < L] T[o]``
+    (o < L + d) and T (R, L, n, F), ew (R, L + d, n): the reference's ``|G|`` entry by entry (the same
+    differences). Returns (R, F)."""
+    L = T.shape[1]
+
+    def contract(absg, e):
+        return np.einsum("roa,roaf->rf", e, absg)
+
+    lo = min(d, L)
+    out = contract(np.abs(T[:, :lo]), ew[:, :lo])  # G = -T[o]
+    if d < L:  # G = T[o - d] - T[o]
+        mid = np.subtract(T[:, :L - d], T[:, d:])
+        out += contract(np.abs(mid, out=mid), ew[:, d:L])
+    hi = max(L, d)
+    return out + contract(np.abs(T[:, hi - d:]), ew[:, hi:])  # G = T[o - d]
+
+
+def _weights(kern: Kernel) -> dict:
+    k = kern.knots
+    kp = np.diff(k) / kern.h  # (L,) slopes [1/s^2]
+    return {"k": k, "K1": kern.integrals, "kp": kp, "akp": np.abs(kp),
+            "dkp": np.abs(np.diff(np.concatenate([[0.0], kp, [0.0]])))}  # |k'_{j-1} - k'_j| at sample j
+
+
+def _correlations(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: int) -> dict:
+    """The window sums of per-step arrays with kernel weights (BLAS over strided views), windows ``starts``
+    (all held by ``buf``), and the per-(window, step) accelerations ``u`` (R, L, n). Returns (R, F) arrays."""
+    k, K1, akp, dkp = wt["k"], wt["K1"], wt["akp"], wt["dkp"]
+    L = K1.size
+    R, s0 = starts.size, int(starts[0])
+    rel = s0 - buf.b0
+
+    def V(key, off=0, length=L):
+        return _view(buf.arr[key], rel + off, R, stride, length)
+
+    # the sample-instant secants w_j and the steps dq_j of each window: u_w = k_w+1 w_w+1 - k_w w_w - k'_w dq_w
+    kw = k[:, None] * _view(grid.w, s0, R, stride, L + 1)
+    x = kw[:, 1:] - kw[:, :-1]
+    u = x - wt["kp"][:, None] * _view(grid.dq, s0, R, stride, L)
+    xs = np.abs(x).sum(axis=2)  # (R, L)
+    out = {"mass_motion": K1 @ V("A_mot"), "coriolis_motion": K1 @ V("H_mot"), "speed_motion": k[:L] @ V("B_mot"),
+           "mass_position": K1 @ V("A_pos") + np.matmul(xs[:, None, :], V("Cmax"))[:, 0] + akp @ V("Dloc"),
+           "coriolis_position": K1 @ V("H_pos"), "speed_position": k[:L] @ V("B_pos"),
+           # measurement through the exact gradient of sum_j k'_j M_j dq_j (sample jj of the window)
+           "gradient_position": dkp[0] * V("Ecur", 0, 1)[:, 0] + dkp[1:L] @ V("Eknot", 1, L - 1)
+           + akp[1:L] @ V("Ediff", 1, L - 1) + dkp[L] * V("Eknot", L, 1)[:, 0],
+           "gK": (K1 - 1.0) @ V("g0"),
+           "mag": np.abs(K1 - 1.0) @ V("ag0"),
+           "rsum": (1.0 + K1) @ V("ag0") + K1 @ V("af0")}
+    return out, u
+
+
+def _pair_terms(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: int, u) -> dict:
+    """The per-(window, step) terms of windows ``starts``: the regressor at the window's scaled speed and
+    acceleration (its window sum ``Wi``, the sum of its magnitudes ``mag``, the reconstruction's magnitudes
+    ``rsum``) and the speed estimates' gradient terms (``cG`` of the Coriolis part, ``sG`` of the differences of
+    M). Returns (R, F) arrays; u : (R, L, n) the windows' accelerations."""
+    k, K1 = wt["k"], wt["K1"]
+    L = K1.size
+    R, rel = starts.size, int(starts[0]) - buf.b0
+    m, dt = grid.m, grid.dt
+    A = buf.arr
+    n, F = A["Mc"].shape[1:]
+
+    def V(key, off=0, length=L):
+        return _view(A[key], rel + off, R, stride, length)
+
+    # Y(qh_j, sqrt(K_w) vh_j, u_w) = g0_j + K_w (f0_j - g0_j) + sum_b Mc_j[b] u_w[b]
+    Y = V("g0") + K1[:, None] * V("fg")
+    Y += np.matmul(u[:, :, None, :], V("Mc"))[:, :, 0]
+    out = {"Wi": Y.sum(axis=1), "mag": np.abs(Y, out=Y).sum(axis=1)}
+    out["rsum"] = np.einsum("rlb,rlbf->rf", np.abs(u), V("aMc"))
+    # h at the measured speed estimate: sum_j K1_j Jv_j (delta_{j+m} - delta_{j+1-m}) / S, summed by parts
+    out["cG"] = _shift_diff_sum(K1[:, None, None] * V("Jv"), _view(grid.e, int(starts[0]) + 1 - m, R, stride,
+                                                                      L + 2 * m - 1), 2 * m - 1) / grid.S
+    # the sample-instant secants w_j in sum_j k_j w_j (M_{j-1} - M_j): (delta_{j+m} - delta_{j-m}) / (2 m dt)
+    Mw = V("Mc", -1, L + 2)
+    dMhat = np.subtract(Mw[:, :-1], Mw[:, 1:])
+    dMhat *= k[:, None, None]
+    out["sG"] = _shift_diff_sum(dMhat, _view(grid.e, int(starts[0]) - m, R, stride, L + 2 * m + 1),
+                                2 * m) / (2 * m * dt)
+    return out
+
+
+def inertial_rows(robot, geo, q, e, spec, m: int, kern: Kernel, starts, progress=None, *, memory: int = 2**27):
+    """The inertial columns' window sums of the certified equation, all windows at once.
+
+    robot : :class:`ident.robots.serial.SerialRobot`; geo : :func:`ident.robots.serial_certified.geometry_bounds`;
+    q, e : (N, n) measured positions and their error bounds [rad]; spec : the log's ``ErrorSpec``; m : secant
+    half-span [steps]; kern : the window kernel (L steps); starts : (R,) first sample of each window (equally
+    spaced, ``m <= starts``, ``starts + L + m < N``); progress : callable(done, total) or None; memory : bytes for
+    the per-(window, step) temporaries (a few windows at a time).
+
+    Returns ``(Wi, mag, recon, parts)``: Wi (R, n, 10 n) the window sums of the regressor [N m per unit
+    parameter], mag (R, n, 10 n) the magnitudes it sums (``sum |Y| + |K - 1| |g0|``, the floating-point radius'
+    base), recon (R, n, 10 n) the bound of the regressor reconstruction's rounding (module docstring), parts
+    {name: (R, n, 10 n)} the radii of :data:`PARTS` (before masking and outward rounding).
+    """
+    starts = np.asarray(starts, dtype=np.int64)
+    grid = StepGrid(q, e, spec.sample_period, spec.qdd_max, m)
+    n = grid.n
+    F = 10 * n * n
+    L, R = kern.steps, starts.size
+    stride = int(starts[1] - starts[0]) if R > 1 else 1
+    if R > 1 and np.any(np.diff(starts) != stride):
+        raise ValueError("starts must be equally spaced")
+    wt = _weights(kern)
+    wb = max(1, -(-max(L, 256) // stride))  # windows per block: about max(L, 256) new steps each
+    rc = max(1, int(memory // (8 * 4 * n * F * (L + 2 * m + 2))))  # windows per batch of pair terms
+    buf = _StepBuffer(robot, geo, grid, (wb - 1) * stride + L + 2)
+    names = ("Wi", "mag", "recon") + PARTS
+    out = {name: np.empty((R, F)) for name in names}
+    c_rec = 2 * (n + 5) * U * (1 + 2 * (L * (n + 3) + 2) * U) * (1 + 4 * U)  # module docstring; the sum's rounding
+    for b0 in range(0, R, wb):
+        blk = starts[b0: b0 + wb]
+        buf.advance(int(blk[0]) - 1, int(blk[-1]) + L + 1)
+        for r0 in range(0, blk.size, rc):
+            sub = blk[r0: r0 + rc]
+            cor, u = _correlations(buf, grid, wt, sub, stride)
+            pair = _pair_terms(buf, grid, wt, sub, stride, u)
+            rows = slice(b0 + r0, b0 + r0 + sub.size)
+            out["Wi"][rows] = pair["Wi"] + cor["gK"]
+            out["mag"][rows] = pair["mag"] + cor["mag"]
+            out["recon"][rows] = up((pair["rsum"] + cor["rsum"]) * c_rec)
+            for name in PARTS:
+                out[name][rows] = cor[name]
+            out["coriolis_position"][rows] += pair["cG"]
+            out["speed_position"][rows] += pair["sG"]
+        if progress is not None:
+            progress(min(R, b0 + wb), R)
+    sh = (R, n, 10 * n)
+    return (out["Wi"].reshape(sh), out["mag"].reshape(sh), out["recon"].reshape(sh),
+            {name: out[name].reshape(sh) for name in PARTS})
