@@ -26,10 +26,13 @@ the rows uninformative.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
+import numpy as np
+
 __all__ = ["KernelFamily", "LONGEST_S", "MIN_KERNEL_STEPS", "SHORTEST_S", "STRIDE_DIVISOR", "check_kernel_steps",
-           "kernel_family"]
+           "kernel_family", "stack_equations"]
 
 MIN_KERNEL_STEPS = 20  # a kernel of fewer sample steps is refused (its slope's variation is ~ 16 / (L h)^2)
 SHORTEST_S = 0.04  # [s] the family's shortest kernel
@@ -76,3 +79,22 @@ def kernel_family(n_samples: int, dt: float, stride: int = 1, *, even: bool = Fa
             steps.append(k)
         L *= FACTOR
     return KernelFamily(steps=tuple(steps), strides=tuple(max(stride, k // STRIDE_DIVISOR) for k in steps))
+
+
+def stack_equations(eqs: list, info: dict):
+    """One interval equation of the rows of several of the same dataclass (each true on its own, so all are at
+    once): every array field and every array in a dict field (``terms``, ``parts``) stacked along the rows, the
+    other fields from the first, ``info`` replaced by ``info``."""
+    first = eqs[0]
+    out = {}
+    for f in dataclasses.fields(first):
+        v = getattr(first, f.name)
+        if f.name == "info":
+            out[f.name] = info
+        elif isinstance(v, np.ndarray):
+            out[f.name] = np.concatenate([getattr(e, f.name) for e in eqs], axis=0)
+        elif isinstance(v, dict) and all(isinstance(x, np.ndarray) for x in v.values()):
+            out[f.name] = {k: np.concatenate([getattr(e, f.name)[k] for e in eqs], axis=0) for k in v}
+        else:
+            out[f.name] = v
+    return type(first)(**out)

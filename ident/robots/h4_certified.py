@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.processing.errorspec import ErrorSpec
-from h4bench.ident.processing.choice import check_kernel_steps, kernel_family
+from h4bench.ident.processing.choice import check_kernel_steps, kernel_family, stack_equations
 from h4bench.ident.processing.weakform import (NonlinearSteps, coulomb_columns, imot_columns,
                                                make_kernel, nonlinear_rows, nonlinear_steps, row_windows,
                                                torque_rows, viscous_columns)
@@ -160,26 +160,17 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     steps = certified_steps(geometry, q, spec, processing, position_error)
     eqs = [certified_rows(steps, make_kernel(L, h, processing.kernel_shape), row_windows(q.shape[0], L, st), tau)
            for L, st in pairs]
-    eq = eqs[0] if len(eqs) == 1 else _stack(eqs)
+    if len(eqs) == 1:
+        eq = eqs[0]
+    else:
+        info = dict(eqs[0].info, kernel_steps=None, rows=sum(e.info["rows"] for e in eqs),
+                    windows=sum(e.info["windows"] for e in eqs), kernel_l1=max(e.info["kernel_l1"] for e in eqs))
+        eq = stack_equations(eqs, info)
     eq.info.update(kernel_shape=processing.kernel_shape, stride=processing.stride,
                    curvature_every=processing.curvature_every)
     if processing.kernel_steps is None:
         eq.info["kernels"] = family.to_dict()
     return eq
-
-
-def _stack(eqs: list[CertifiedEquation]) -> CertifiedEquation:
-    """One interval equation of the rows of several (each is true on its own, so all are at once)."""
-    first = eqs[0]
-    info = dict(first.info)
-    info.update(kernel_steps=None, rows=sum(e.info["rows"] for e in eqs), windows=sum(e.info["windows"] for e in eqs),
-                kernel_l1=max(e.info["kernel_l1"] for e in eqs),
-                sign_uncertain_steps=first.info["sign_uncertain_steps"])
-    return CertifiedEquation(Wc=np.vstack([e.Wc for e in eqs]), D=np.vstack([e.D for e in eqs]),
-                             y=np.concatenate([e.y for e in eqs]), bound=np.concatenate([e.bound for e in eqs]),
-                             sample=np.concatenate([e.sample for e in eqs]),
-                             joint=np.concatenate([e.joint for e in eqs]), info=info, names=first.names,
-                             terms={k: np.concatenate([e.terms[k] for e in eqs]) for k in first.terms})
 
 
 @dataclass(frozen=True)
