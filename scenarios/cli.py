@@ -377,7 +377,9 @@ def identify(
     0 done: every requested method gave a box or proved the data inconsistent;
     2 bad option, file or data, or a method that cannot be resolved (one error line on stderr, nothing computed);
     3 the data are proven inconsistent with the bound (result.json still written, with the smallest consistent
-    bound in --bound's units and the processed rows' one);
+    bound in --bound's units and the processed rows' one), or with --spec a stated qd_max / qdd_max is below what
+    the positions prove (each named on stderr: entry, joint, stated value, proven lower bound; result.json still
+    written, status spec_contradicted, no box);
     4 some requested method failed (raised, exited, timed out, changed its inputs, returned no box; result.json
     still written, the failure in its entry).
     """
@@ -419,7 +421,7 @@ def identify(
         _fail(str(exc))
     if as_json:
         typer.echo(_json_text(result))
-    else:
+    elif (result.get("methods", {}).get("certified") or {}).get("status") != "spec_contradicted":
         _print_summary(result)
         if result.get("parameter_expressions"):
             import textwrap
@@ -427,21 +429,44 @@ def identify(
             if "min_consistent_bound_raw" in result:
                 typer.echo(f"min consistent bound / ||h||_1 (raw rows, approximate): "
                            f"{result['min_consistent_bound_raw']:.4g} N m")
-            if "certified" in result:
+            if "dominant" in result.get("certified", {}):
                 c = result["certified"]
                 typer.echo(f"certified: {c['rows']} rows, dominant term {c['dominant']}; stated motion bounds "
-                           + ("contradicted: " + "; ".join(c["spec_check"]["contradicted"])
-                              if c["spec_check"]["contradicted"] else "not contradicted by the data"))
+                           "not contradicted by the data")
             typer.echo("base parameters (base <- standard):")
             for n, e in zip(result["parameters"], result["parameter_expressions"]):
                 typer.echo(textwrap.fill(f"{n} = {e}", width=80, subsequent_indent="    "))
     if result.get("kind") == "identify" and not as_json and "certified" not in result:
         typer.echo("narrower-than-hull check: " + _verdict(result))
+    if not as_json:
+        _certified_lines(result)
+    contradicted = (result.get("methods", {}).get("certified") or {}).get("contradicted")
+    if contradicted:
+        for line in contradicted:
+            typer.secho(f"error: {line}", fg=typer.colors.RED, err=True)
+        typer.secho("error: no box is claimed (the certified radii rest on the stated bounds); result.json written",
+                    fg=typer.colors.RED, err=True)
+        raise typer.Exit(EXIT_INCONSISTENT)
     if result.get("consistent") is False:
         typer.secho(f"error: the data are inconsistent with the bound (proven); {_smallest_bound(result)}",
                     fg=typer.colors.RED, err=True)
         raise typer.Exit(EXIT_INCONSISTENT)
     _exit_if_failed(result, EXIT_METHOD_FAILED)
+
+
+def _certified_lines(result: dict) -> None:
+    """A certified identification's row radius by its parts and the parameters its box leaves at the prior."""
+    c = result.get("certified")
+    if not isinstance(c, dict):
+        return
+    rr = c.get("row_radius")
+    if rr:
+        typer.echo(f"certified row radius: torque side (torque, model, rounding: any theta) max {_num(rr['torque_side_max'])}"
+                   f" N m; whole row (+ D |theta| at {rr['at']}) median {_num(rr['total_median'])} N m, max "
+                   f"{_num(rr['total_max'])} N m")
+    diag = c.get("prior_diagnosis") or {}
+    if diag.get("message"):
+        typer.secho(f"warning: {diag['message']}", fg=typer.colors.YELLOW, err=True)
 
 
 def _check_timeout(seconds) -> None:

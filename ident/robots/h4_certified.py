@@ -37,11 +37,22 @@ from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
 from h4bench.ident.robots.h4_jets import box_jets, point_jets
 
-__all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "Processing", "certified_equation", "curvature_bounds",
-           "nacelle_terms"]
+__all__ = ["CURVATURE_FACTOR", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "Processing", "certified_equation",
+           "curvature_bounds", "nacelle_terms", "stated_assumptions"]
 
 CURVATURE_FACTOR = 2.0  # stated factor on the sampled second-derivative maxima (not proven; see module docstring)
 N_JOINTS = 4
+# The shortest kernel [sample steps]. The encoder error enters every acceleration column through the kernel's
+# slope (summation by parts): about 8 pi e / (L h)^2 per unit parameter for a Hann kernel of L steps, and the
+# nacelle columns' through their gradients likewise; measured on `certified --quick` (seed 0, 20 000 counts), kernels
+# of 7, 14 and 20 steps leave every one of the 14 parameters at the prior. Shorter kernels are refused.
+MIN_KERNEL_STEPS = 20
+# What the derived equation states without proving it (module docstring), entry -> source
+STATED = {
+    "assembly_mode": "stated, not proven: the robot stays in the assembly mode that the forward kinematics of the "
+                     "measured positions gives (the interval jets verify the pose within that branch)",
+    "sin_cos": "stated, not proven: numpy's sin and cos are within 4 ulp (the interval jets widen by that much)",
+}
 
 
 @dataclass(frozen=True)
@@ -53,6 +64,21 @@ class Processing:
     kernel_shape: str = "hann"
     stride: int = 2
     curvature_every: int = 10
+
+    def __post_init__(self) -> None:
+        from h4bench.ident.processing.weakform import KERNEL_SHAPES  # noqa: PLC0415
+
+        for key in ("kernel_steps", "stride", "curvature_every"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{key} must be an integer >= 1, got {v!r}")
+        if self.kernel_steps < MIN_KERNEL_STEPS:
+            raise ValueError(f"kernel_steps must be >= {MIN_KERNEL_STEPS} sample steps, got {self.kernel_steps}: the "
+                             "encoder error enters the acceleration columns through the kernel's slope, about "
+                             "8 pi e / (kernel_steps h)^2 per unit parameter, and kernels shorter than "
+                             f"{MIN_KERNEL_STEPS} steps leave every parameter at its prior")
+        if self.kernel_shape not in KERNEL_SHAPES:
+            raise ValueError(f"kernel_shape must be one of {KERNEL_SHAPES}, got {self.kernel_shape!r}")
 
 
 @dataclass(frozen=True)
@@ -66,6 +92,16 @@ class CertifiedEquation(IntervalEquation):
 
     names: tuple = PARAMETER_NAMES
     terms: dict = field(default_factory=dict, compare=False)
+
+
+def stated_assumptions(info: dict) -> dict:
+    """Every assumption a :class:`CertifiedEquation` rests on without proof, entry -> source: :data:`STATED` and
+    the equation's own ``info["not_proven"]`` (sampled curvature bounds x :data:`CURVATURE_FACTOR`, the torque
+    between samples) as ``not_proven_1``, ``not_proven_2``, ..."""
+    out = dict(STATED)
+    for i, what in enumerate(info.get("not_proven", []), start=1):
+        out[f"not_proven_{i}"] = f"stated, not proven: {what}"
+    return out
 
 
 def nacelle_terms(geometry, q, qd, x=None, x0=None):
@@ -156,6 +192,10 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     kernel = make_kernel(processing.kernel_steps, h, processing.kernel_shape)
     windows = row_windows(q.shape[0], processing.kernel_steps, processing.stride)
     R = windows.start.size
+    if R * N_JOINTS <= len(PARAMETER_NAMES):
+        raise ValueError(f"the log gives {R * N_JOINTS} rows ({R} kernel windows of {processing.kernel_steps} steps "
+                         f"every {processing.stride} samples, 4 joints), which must exceed the "
+                         f"{len(PARAMETER_NAMES)} parameters: a longer log or a smaller stride")
     p = len(PARAMETER_NAMES)
     cols = {name: np.zeros((R, N_JOINTS, p)) for name in ("value", "measurement", "truncation", "second_order",
                                                           "sign")}
