@@ -235,7 +235,9 @@ def run(
 ) -> None:
     """Run a scenario headless; write runs/NAME/ (result.json, report.md, PNG plots, dataset, replay.rrd).
 
-    Exit codes: 0 done (every method gave a box or proved the data inconsistent, in every run); 2 bad option,
+    Exit codes: 0 done (every method gave a box or proved the data inconsistent, in every run); 1 a certified
+    box's certificate failed (a stated assumption below the simulated truth, a row violation; in some run of a
+    campaign): named on stderr and in the first lines of report.md; 2 bad option,
     scenario or method (nothing computed) or a failed run; 4 some method failed (in some run; the results are
     still written, the failures in the methods' entries); 130 interrupted.
     """
@@ -264,7 +266,19 @@ def run(
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
+    _exit_if_certificate_failed(result)
     _exit_if_failed(result, EXIT_METHOD_FAILED)
+
+
+def _exit_if_certificate_failed(result: dict) -> None:
+    """Exit 1 (a check failed) when a certified box's certificate failed: each failed assumption on stderr."""
+    cert = result.get("certificate")
+    if isinstance(cert, dict) and cert.get("status") == "failed":
+        for line in cert.get("failed", []):
+            typer.secho(f"error: certificate: {line}", fg=typer.colors.RED, err=True)
+        typer.secho("error: the certified box is not certified (the first lines of report.md name why)",
+                    fg=typer.colors.RED, err=True)
+        raise typer.Exit(1)
 
 
 def _importable_from_cwd(methods: str | None) -> None:

@@ -102,7 +102,8 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
     "certified": ...}`` (JSON-ready; the schema is in ``docs/results.md``).
     """
     from h4bench import ident
-    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds
+    from h4bench.ident.processing.motion_check import check_motion_bounds
+    from h4bench.ident.robots.serial_certified import certified_equation
     from h4bench.scenarios.tx40_steps import jsonable
 
     progress = progress or (lambda *a: None)
@@ -114,7 +115,7 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
     n1 = s.n1 if not cc["max_samples"] else min(s.n1, int(cc["max_samples"]))
     n2 = s.n - s.n1 if not cc["max_samples"] else min(s.n - s.n1, max(int(cc["max_samples"]) // 2, 3000))
     e = joint_position_error(spec, s.log.q_motor[:s.n])
-    check = check_motion_bounds(s.q, spec, span=3, position_error=e)
+    check = check_motion_bounds(s.q[:s.n], spec, position_error=e[:s.n])
     kw = {"half_width": int(cc["half_width"]), "stride": int(cc["stride"])}
     eq = certified_equation(s.robot, s.base, s.q[:n1], s.tau[:n1], spec, position_error=e[:n1],
                             progress=lambda i, n: progress("certified equation", i, 2 * n), **kw)

@@ -81,7 +81,8 @@ class SpecCheck:
         positions prove max |qdd| >= 431.2 rad/s^2`` (the proven value rounded down)."""
         return [f"{c['entry']} of joint {c['joint']} = {c['stated']:.6g} {c['unit']} is contradicted by the data: "
                 f"the positions prove max |{c['entry'][:-4]}| >= {floor_digits(c['proven_lower']):.6g} {c['unit']}"
-                + (f" (over {c['span']} sample steps from sample {c['sample']})" if c["span"] is not None else "")
+                + (f" (over {c['span']} sample step{'s' if c['span'] != 1 else ''} from sample {c['sample']})"
+                   if c["span"] is not None else "")
                 for c in self.contradictions]
 
     def to_dict(self) -> dict:
