@@ -237,7 +237,8 @@ def run(
 
     Exit codes: 0 done (every method gave a box or proved the data inconsistent, in every run); 1 a certified
     box's certificate failed (a stated assumption below the simulated truth, a row violation; in some run of a
-    campaign): named on stderr and in the first lines of report.md; 2 bad option,
+    campaign): named on stderr and in the first lines of report.md; 3 (tx40 --error-model derived) the log
+    contradicts a stated motion bound of the certified box (no box); 2 bad option,
     scenario or method (nothing computed) or a failed run; 4 some method failed (in some run; the results are
     still written, the failures in the methods' entries); 130 interrupted.
     """
@@ -266,8 +267,20 @@ def run(
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
+    _exit_if_contradicted(result)
     _exit_if_certificate_failed(result)
     _exit_if_failed(result, EXIT_METHOD_FAILED)
+
+
+def _exit_if_contradicted(result: dict) -> None:
+    """Exit 3 when the data contradict a stated motion bound of a certified box's specification (each named)."""
+    contradicted = (result.get("methods", {}).get("certified") or {}).get("contradicted")
+    if contradicted:
+        for line in contradicted:
+            typer.secho(f"error: {line}", fg=typer.colors.RED, err=True)
+        typer.secho("error: no box is claimed (the certified radii rest on the stated bounds); result.json written",
+                    fg=typer.colors.RED, err=True)
+        raise typer.Exit(EXIT_INCONSISTENT)
 
 
 def _exit_if_certificate_failed(result: dict) -> None:
@@ -454,13 +467,7 @@ def identify(
         typer.echo("narrower-than-hull check: " + _verdict(result))
     if not as_json:
         _certified_lines(result)
-    contradicted = (result.get("methods", {}).get("certified") or {}).get("contradicted")
-    if contradicted:
-        for line in contradicted:
-            typer.secho(f"error: {line}", fg=typer.colors.RED, err=True)
-        typer.secho("error: no box is claimed (the certified radii rest on the stated bounds); result.json written",
-                    fg=typer.colors.RED, err=True)
-        raise typer.Exit(EXIT_INCONSISTENT)
+    _exit_if_contradicted(result)
     if result.get("consistent") is False:
         typer.secho(f"error: the data are inconsistent with the bound (proven); {_smallest_bound(result)}",
                     fg=typer.colors.RED, err=True)
