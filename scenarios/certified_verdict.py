@@ -100,9 +100,11 @@ def prior_diagnosis(names, relative_width, terms: dict, theta_abs, y, hints: dic
         keep = order[: int(np.searchsorted(cum, 0.9)) + 1]
         out["columns"] = [{"name": str(names[j]), "max_radius_per_unit": float(term[:, j].max())} for j in keep]
     if out["parameters"]:
-        cols = (" on the " + ", ".join(c["name"] for c in out["columns"]) + " column(s) (radius up to "
-                + ", ".join(f"{c['max_radius_per_unit']:.3g}" for c in out["columns"]) + " N m per unit parameter)"
-                if out["columns"] else "")
+        shown = out["columns"][:6]
+        more = f" and {len(out['columns']) - 6} more" if len(out["columns"]) > 6 else ""
+        cols = (" on the " + ", ".join(c["name"] for c in shown) + f"{more} column(s) (radius up to "
+                + ", ".join(f"{c['max_radius_per_unit']:.3g}" for c in shown) + " N m per unit parameter)"
+                if shown else "")
         out["message"] = (f"{len(out['parameters'])} of {len(rel)} parameters stay at the prior "
                           f"({', '.join(out['parameters'])}): the rows' radius is dominated by the {dominant} term"
                           f"{cols}: {100 * out['share']:.1f} % of the summed radii, median row radius "
