@@ -20,8 +20,9 @@ REPORT_IMPORTS = ("matplotlib.pyplot", "scipy.special")
 def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: list[str], method_line,
                   tail: list[str] = (), head: list[str] = ()) -> None:
     """A campaign kind's files: ``widths.png`` (relative widths over the runs), ``report.md`` (``head``: the
-    kind's verdict lines first, if any; ``# Scenario `name`: title``, the kind's ``facts``, the throughput, one line per method from ``method_line(name, m)``, the
-    median relative width table, ``tail``) and ``result.json``, atomically each."""
+    kind's verdict lines first, if any; ``# Scenario `name`: title``, the kind's ``facts``, the throughput, one
+    line per method from ``method_line(name, m)``, the median relative width table, ``tail``) and
+    ``result.json``, atomically each."""
     from h4bench.scenarios.judging import judged_table, plot_coverage
     from h4bench.scenarios.report import relative_width_table
     from h4bench.scenarios.rundir import write_json

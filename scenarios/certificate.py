@@ -17,9 +17,9 @@ estimator. Per processed row and term, the derived radius beside the actual erro
 
 ``status`` is ``failed`` when any stated assumption does not hold (a motion bound or the torque error below the
 truth's, a stated motion bound the measured positions contradict) or any row violates a check, each named in
-``failed`` (entry, joint, stated and true values); ``violations`` counts every failed check (all terms); ``min_margin`` is the smallest ``radius - |actual|`` of
-the total check [N m]; ``terms`` each term's largest radius at the true parameters [N m] and ``shares`` its mean
-share of the row radius.
+``failed`` (entry, joint, stated and true values); ``violations`` counts every failed check (all terms);
+``min_margin`` is the smallest ``radius - |actual|`` of the total check [N m]; ``terms`` each term's largest radius
+at the true parameters [N m] and ``shares`` its mean share of the row radius.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ from typing import Optional
 
 import typer
 
+from h4bench.scenarios.cli_certified import certified_lines, exit_if_certificate_failed, exit_if_contradicted
 from h4bench.scenarios.exit_codes import EXIT_INCONSISTENT, EXIT_METHOD_FAILED
 
 app = typer.Typer(
@@ -267,31 +268,9 @@ def run(
     else:
         _print_summary(result)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
-    _exit_if_contradicted(result)
-    _exit_if_certificate_failed(result)
+    exit_if_contradicted(result)
+    exit_if_certificate_failed(result)
     _exit_if_failed(result, EXIT_METHOD_FAILED)
-
-
-def _exit_if_contradicted(result: dict) -> None:
-    """Exit 3 when the data contradict a stated motion bound of a certified box's specification (each named)."""
-    contradicted = (result.get("methods", {}).get("certified") or {}).get("contradicted")
-    if contradicted:
-        for line in contradicted:
-            typer.secho(f"error: {line}", fg=typer.colors.RED, err=True)
-        typer.secho("error: no box is claimed (the certified radii rest on the stated bounds); result.json written",
-                    fg=typer.colors.RED, err=True)
-        raise typer.Exit(EXIT_INCONSISTENT)
-
-
-def _exit_if_certificate_failed(result: dict) -> None:
-    """Exit 1 (a check failed) when a certified box's certificate failed: each failed assumption on stderr."""
-    cert = result.get("certificate")
-    if isinstance(cert, dict) and cert.get("status") == "failed":
-        for line in cert.get("failed", []):
-            typer.secho(f"error: certificate: {line}", fg=typer.colors.RED, err=True)
-        typer.secho("error: the certified box is not certified (the first lines of report.md name why)",
-                    fg=typer.colors.RED, err=True)
-        raise typer.Exit(1)
 
 
 def _importable_from_cwd(methods: str | None) -> None:
@@ -466,28 +445,13 @@ def identify(
     if result.get("kind") == "identify" and not as_json and "certified" not in result:
         typer.echo("narrower-than-hull check: " + _verdict(result))
     if not as_json:
-        _certified_lines(result)
-    _exit_if_contradicted(result)
+        certified_lines(result)
+    exit_if_contradicted(result)
     if result.get("consistent") is False:
         typer.secho(f"error: the data are inconsistent with the bound (proven); {_smallest_bound(result)}",
                     fg=typer.colors.RED, err=True)
         raise typer.Exit(EXIT_INCONSISTENT)
     _exit_if_failed(result, EXIT_METHOD_FAILED)
-
-
-def _certified_lines(result: dict) -> None:
-    """A certified identification's row radius by its parts and the parameters its box leaves at the prior."""
-    c = result.get("certified")
-    if not isinstance(c, dict):
-        return
-    rr = c.get("row_radius")
-    if rr:
-        typer.echo(f"certified row radius: torque side (torque, model, rounding: any theta) max {_num(rr['torque_side_max'])}"
-                   f" N m; whole row (+ D |theta| at {rr['at']}) median {_num(rr['total_median'])} N m, max "
-                   f"{_num(rr['total_max'])} N m")
-    diag = c.get("prior_diagnosis") or {}
-    if diag.get("message"):
-        typer.secho(f"warning: {diag['message']}", fg=typer.colors.YELLOW, err=True)
 
 
 def _check_timeout(seconds) -> None:

@@ -266,7 +266,7 @@ def test_a_failed_certificate_names_the_assumption_first(run_and_spec, tmp_path)
     import typer
 
     from h4bench.scenarios.certificate import verdict_lines
-    from h4bench.scenarios.cli import _exit_if_certificate_failed
+    from h4bench.scenarios.cli_certified import exit_if_certificate_failed
 
     run_, spec = run_and_spec
     cert = _short(run_, spec, n=3000, qd_max=np.full(4, 3.0))
@@ -278,7 +278,7 @@ def test_a_failed_certificate_names_the_assumption_first(run_and_spec, tmp_path)
     lines = verdict_lines({"certificate": cert, "methods": {"certified": {"status": "ok", "all_enclosed": True}}})
     assert lines[0].startswith("**Certified box: FAILED**") and lines[2].startswith("- qd_max of joint 1 = 3 rad/s")
     with pytest.raises(typer.Exit) as exc:
-        _exit_if_certificate_failed({"certificate": cert})
+        exit_if_certificate_failed({"certificate": cert})
     assert exc.value.exit_code == 1
     held = _short(run_, spec)
     assert held["status"] == "ok" and held["failed"] == []
