@@ -95,10 +95,17 @@ class CertifiedEquation(IntervalEquation):
 
 
 def stated_assumptions(info: dict) -> dict:
-    """Every assumption a :class:`CertifiedEquation` rests on without proof, entry -> source: :data:`STATED` and
-    the equation's own ``info["not_proven"]`` (sampled curvature bounds x :data:`CURVATURE_FACTOR`, the torque
-    between samples) as ``not_proven_1``, ``not_proven_2``, ..."""
+    """Every assumption a :class:`CertifiedEquation` rests on without proof, entry -> source: :data:`STATED`, the
+    fallback's ``curvature_factor`` (with the number of steps that used it) and the equation's own
+    ``info["not_proven"]`` (sampled curvature bounds x :data:`CURVATURE_FACTOR`, the torque between samples) as
+    ``not_proven_1``, ``not_proven_2``, ..."""
     out = dict(STATED)
+    steps = info.get("steps", 0)
+    fallback = max(steps - info.get("encoder_boxes_proven", steps), steps - info.get("motion_boxes_proven", steps))
+    out["curvature_factor"] = (f"stated, not proven: a step whose box the interval jets cannot verify falls back to "
+                               f"second-derivative bounds sampled along the measured motion times "
+                               f"{info.get('curvature_factor', CURVATURE_FACTOR):g}; used on {fallback} of {steps} "
+                               "steps of this equation")
     for i, what in enumerate(info.get("not_proven", []), start=1):
         out[f"not_proven_{i}"] = f"stated, not proven: {what}"
     return out

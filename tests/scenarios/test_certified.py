@@ -258,6 +258,8 @@ def test_identify_h4_with_a_coarse_encoder_says_what_leaves_the_prior(run_and_sp
     assert "certified row radius: torque side" in out
     src = r["error_model"]["sources"]
     assert src["assembly_mode"].startswith("stated, not proven") and src["sin_cos"].startswith("stated, not proven")
+    steps = r["certified"]["steps"]
+    assert src["curvature_factor"].endswith(f"times 2; used on 0 of {steps} steps of this equation")
 
 
 def test_a_failed_certificate_names_the_assumption_first(run_and_spec, tmp_path):
