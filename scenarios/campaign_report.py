@@ -18,10 +18,11 @@ REPORT_IMPORTS = ("matplotlib.pyplot", "scipy.special")
 
 
 def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: list[str], method_line,
-                  tail: list[str] = ()) -> None:
-    """A campaign kind's files: ``widths.png`` (relative widths over the runs), ``report.md`` (``# Scenario
-    `name`: title``, the kind's ``facts``, the throughput, one line per method from ``method_line(name, m)``, the
-    median relative width table, ``tail``) and ``result.json``, atomically each."""
+                  tail: list[str] = (), head: list[str] = ()) -> None:
+    """A campaign kind's files: ``widths.png`` (relative widths over the runs), ``report.md`` (``head``: the
+    kind's verdict lines first, if any; ``# Scenario `name`: title``, the kind's ``facts``, the throughput, one
+    line per method from ``method_line(name, m)``, the median relative width table, ``tail``) and
+    ``result.json``, atomically each."""
     from h4bench.scenarios.judging import judged_table, plot_coverage
     from h4bench.scenarios.report import relative_width_table
     from h4bench.scenarios.rundir import write_json
@@ -37,7 +38,7 @@ def write_outputs(result: dict, runs: list[dict], out: Path, title: str, facts: 
         workers = 0 if info.get("scheduler") else info["workers"]
         sections = {**staged["sections"], "report": time.perf_counter() - t_report}
         info["timings"] = campaign_timings(runs, staged["computed"], workers, staged["started"], sections)
-    lines = [f"# Scenario `{result['scenario']}`: {title}", "", *facts, *throughput_lines(result["campaign"])]
+    lines = [*head, f"# Scenario `{result['scenario']}`: {title}", "", *facts, *throughput_lines(result["campaign"])]
     lines += [f"- {name}: {method_line(name, m)}" for name, m in result["methods"].items()]
     lines += ["", "## Every method side by side", "",
               "Coverage: runs whose box encloses the truth / runs (a run without a box does not cover), with its exact "

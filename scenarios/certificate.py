@@ -15,9 +15,11 @@ estimator. Per processed row and term, the derived radius beside the actual erro
   model bound must cover);
 * ``total``: ``|y - Wc theta_true| <= bound + D theta_true`` on the equation the estimator saw.
 
-``violations`` counts every failed check (all terms); ``min_margin`` is the smallest ``radius - |actual|`` of
-the total check [N m]; ``terms`` each term's largest radius at the true parameters [N m] and ``shares`` its mean
-share of the row radius.
+``status`` is ``failed`` when any stated assumption does not hold (a motion bound or the torque error below the
+truth's, a stated motion bound the measured positions contradict) or any row violates a check, each named in
+``failed`` (entry, joint, stated and true values); ``violations`` counts every failed check (all terms);
+``min_margin`` is the smallest ``radius - |actual|`` of the total check [N m]; ``terms`` each term's largest radius
+at the true parameters [N m] and ``shares`` its mean share of the row radius.
 """
 
 from __future__ import annotations
@@ -27,11 +29,14 @@ import time
 import numpy as np
 
 from h4bench.ident.processing.errorspec import ErrorSpec
-from h4bench.ident.robots.h4_certified import Processing, certified_equation
+from h4bench.ident.processing.motion_check import check_motion_bounds
+from h4bench.ident.robots.h4_certified import Processing, certified_equation, stated_assumptions
 from h4bench.scenarios import judging
+from h4bench.scenarios.certified_verdict import H4_HINTS, prior_diagnosis, row_radius_summary
 from h4bench.scenarios.spec import ScenarioError
 
-__all__ = ["certify", "check_certificate", "processing_of", "simulated_error_spec"]
+__all__ = ["assumption_failures", "certify", "check_certificate", "processing_of", "simulated_error_spec",
+           "verdict_lines"]
 
 _COLUMN_CHECKED = slice(0, 10)  # Imot1-4, Mnac, Ibc, Fv1-4
 
@@ -67,7 +72,12 @@ def check_certificate(geometry, ceq, truth, tau_logged, error_spec, processing, 
     total = sum(radii.values())
     qd_true, qdd_true = np.abs(truth.qd).max(axis=0), np.abs(truth.qdd).max(axis=0)
     motion_held = bool(np.all(qd_true <= error_spec.qd_max) and np.all(qdd_true <= error_spec.qdd_max))
+    failed = assumption_failures(error_spec, qd_true, qdd_true,
+                                 np.abs(np.asarray(truth.tau_applied) - np.asarray(tau_logged)).max(axis=0))
+    failed += [f"{c['violations']} of {len(ceq)} rows violate the certificate's {name} check (largest actual error "
+               f"{c['max_actual_over_radius']:.4g} x its radius)" for name, c in checks.items() if c["violations"]]
     return {
+        "status": "failed" if failed else "ok", "failed": failed,
         "rows": len(ceq), "violations": int(sum(c["violations"] for c in checks.values()) + (not motion_held)),
         "min_margin": checks["total"]["min_margin"], "checks": checks,
         "terms": {k: float(np.max(v)) for k, v in radii.items()},
@@ -77,6 +87,38 @@ def check_certificate(geometry, ceq, truth, tau_logged, error_spec, processing, 
                           "held": motion_held},
         "equation": dict(ceq.info),
     }
+
+
+def assumption_failures(error_spec, qd_true, qdd_true, torque_error_true) -> list[str]:
+    """Every stated bound of ``error_spec`` below the simulated truth's value, one line each (entry, joint, stated,
+    true): ``qd_max``, ``qdd_max`` against the true motion's max |qd|, |qdd| (4,) [rad/s, rad/s^2], and
+    ``torque_error`` against the injected error's max |applied - logged| (4,) [N m]."""
+    out = []
+    for entry, stated, true, unit, what in (
+            ("qd_max", error_spec.qd_max, qd_true, "rad/s", "max |qd|"),
+            ("qdd_max", error_spec.qdd_max, qdd_true, "rad/s^2", "max |qdd|"),
+            ("torque_error", error_spec.torque_error, torque_error_true, "N m", "injected max |tau_applied - "
+                                                                               "tau_logged|")):
+        out += [f"{entry} of joint {i + 1} = {stated[i]:.6g} {unit} is below the simulated truth's {what} = "
+                f"{true[i]:.6g} {unit}" for i in np.flatnonzero(np.asarray(true) > np.asarray(stated))]
+    return out
+
+
+def verdict_lines(result: dict) -> list[str]:
+    """The first lines of a report with a certified box: the certificate's verdict (every failed assumption or
+    check named), then the box's (encloses the truth or not; the parameters left at the prior and why)."""
+    c, m = result["certificate"], result["methods"]["certified"]
+    if c.get("status") == "failed":
+        lines = [f"**Certified box: FAILED**: {len(c['failed'])} stated assumption(s) or check(s) do not hold in "
+                 "this simulation, so the box is not certified:", "", *(f"- {f}" for f in c["failed"])]
+    else:
+        lines = [f"**Certified box: {'encloses the truth' if m.get('all_enclosed') else 'DOES NOT enclose the truth'}"
+                 f"** ({m['status']}); the certificate holds: {c['rows']} rows, 0 violations, every stated "
+                 "assumption held by the truth."]
+    diag = (result.get("certified") or {}).get("prior_diagnosis") or {}
+    if diag.get("message"):
+        lines += ["", f"- {diag['message']}"]
+    return lines
 
 
 def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float) -> ErrorSpec:
@@ -103,7 +145,9 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float) -
         "qdd_max": (f"stated: {em['motion_margin_qdd']:g} x the reference trajectory's peak |qdd| per joint "
                     "(tracking margin), checked against the truth" if not em["qdd_max"] else
                     "stated in error_model.qdd_max"),
-        "model_error": "stated in error_model.model_error",
+        "model_error": (f"stated: {float(em['model_error']):g} N m in the scenario's [error_model] model_error "
+                        "(0: the regressor is taken as the simulated robot's exact structure), checked against the "
+                        "truth in the certificate's motion and total checks"),
     }
     return ErrorSpec(n_joints=4, sample_period=float(dt), position_resolution=2 * np.pi / counts,
                      position_rounding="nearest", torque_timing="hold", torque_error=torque, qd_max=qd, qdd_max=qdd,
@@ -111,9 +155,13 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float) -
 
 
 def processing_of(spec: dict) -> Processing:
+    """The scenario's ``[certified]`` table as :class:`Processing`; errors name the table and the key."""
     c = spec["certified"]
-    return Processing(kernel_steps=int(c["kernel_steps"]) or None, kernel_shape=str(c["kernel_shape"]),
-                      stride=int(c["stride"]), curvature_every=int(c["curvature_every"]))
+    try:  # kernel_steps 0: every kernel of the family (ident.processing.choice)
+        return Processing(kernel_steps=int(c["kernel_steps"]) or None, kernel_shape=str(c["kernel_shape"]),
+                          stride=int(c["stride"]), curvature_every=int(c["curvature_every"]))
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"[certified] {exc}") from None
 
 
 def certify(run_, spec: dict) -> dict:
@@ -133,8 +181,21 @@ def certify(run_, spec: dict) -> dict:
     cert = check_certificate(run_.geometry, ceq, run_.truth, run_.dataset.tau, error_spec, processing,
                              run_.theta_true)
     cert["seconds"] = time.perf_counter() - t0
-    out = {"certificate": cert, "error_model": error_spec.to_dict(), "certified_entry": entry,
+    data_check = check_motion_bounds(run_.dataset.q, error_spec)  # what identify --spec would say, no truth
+    cert["spec_check"] = data_check.to_dict()
+    if data_check.contradicted:
+        cert["failed"] += [f"data check: {c}" for c in data_check.contradicted]
+        cert["status"] = "failed"
+    error_model = error_spec.to_dict()
+    error_model["sources"].update(stated_assumptions(ceq.info))
+    out = {"certificate": cert, "error_model": error_model, "certified_entry": entry,
            "width_vs_tuned_geomean": None, "width_vs_tuned": None}
+    if entry["status"] == "ok":
+        theta_abs = np.maximum(np.abs(np.asarray(entry["lower"])), np.abs(np.asarray(entry["upper"])))
+        rel = np.asarray(entry["width"]) / (run_.prior.upper - run_.prior.lower)
+        out["certified"] = {"prior_diagnosis": prior_diagnosis(ceq.names, rel, ceq.terms, theta_abs, ceq.y, H4_HINTS),
+                            "row_radius": row_radius_summary(ceq.bound, ceq.D, theta_abs,
+                                                             "the certified box's largest |theta|")}
     tuned = run_.boxes.get("hull")
     if entry["status"] == "ok" and tuned is not None:
         ratio = np.asarray(entry["width"]) / np.maximum(tuned.width, 1e-300)

@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from h4bench import ident
+from h4bench.scenarios.certified_verdict import (SERIAL_HINTS, contradicted_entry, prior_diagnosis,
+                                                 row_radius_summary)
 from h4bench.scenarios.identify import OptionError, read_serial_log, urdf_robot_and_prior
 from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 
@@ -29,6 +31,7 @@ KERNEL_SECONDS = 0.08  # default kernel length [s] (an 80 ms triangle), rounded 
 STRIDE_SECONDS = 0.02  # default row spacing [s]
 REFINE_RTOL = 0.02  # stop refining when the widths' geometric mean shrank by less than this in a round
 _KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "refine": int}
+MIN_KERNEL_STEPS = 4  # the serial certified equation's smallest half-width is 2 steps
 
 
 def read_kernel(spec_path, dt: float) -> dict:
@@ -48,15 +51,18 @@ def read_kernel(spec_path, dt: float) -> dict:
     for k, kind in _KEYS.items():
         if isinstance(out[k], bool) or not isinstance(out[k], kind):
             raise OptionError(f"--spec {path} [certified].{k} must be {kind.__name__}, got {out[k]!r}")
-    if out["kernel_steps"] < 4 or out["kernel_steps"] % 2:
-        raise OptionError(f"--spec {path} [certified].kernel_steps must be an even integer >= 4, got "
-                          f"{out['kernel_steps']!r}")
+    if out["kernel_steps"] < MIN_KERNEL_STEPS or out["kernel_steps"] % 2:
+        raise OptionError(f"--spec {path} [certified].kernel_steps must be an even integer >= {MIN_KERNEL_STEPS}, got "
+                          f"{out['kernel_steps']!r}: the kernel is two halves of kernel_steps / 2 steps each, and "
+                          f"shorter kernels multiply the position error on the acceleration columns by about "
+                          f"4 / (kernel_steps / 2 dt)^2 per unit parameter")
     if out["kernel_shape"] not in ("triangle", "hann"):
         raise OptionError(f"--spec {path} [certified].kernel_shape must be triangle or hann, got "
                           f"{out['kernel_shape']!r}")
-    if out["stride"] < 1 or out["refine"] < 0:
-        raise OptionError(f"--spec {path} [certified]: stride must be >= 1 and refine >= 0, got {out['stride']!r}, "
-                          f"{out['refine']!r}")
+    if out["stride"] < 1:
+        raise OptionError(f"--spec {path} [certified].stride must be an integer >= 1 [samples], got {out['stride']!r}")
+    if out["refine"] < 0:
+        raise OptionError(f"--spec {path} [certified].refine must be an integer >= 0, got {out['refine']!r}")
     return out
 
 
@@ -68,7 +74,8 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     spec: the hull's set is proven empty)."""
     from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
     from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
-    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds
+    from h4bench.ident.processing.motion_check import check_motion_bounds
+    from h4bench.ident.robots.serial_certified import certified_equation
 
     t0 = time.perf_counter()
     robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,
@@ -88,23 +95,33 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     if abs(dt - spec.sample_period) > 1e-3 * spec.sample_period:
         raise OptionError(f"--spec {spec_path}: sample_period = {spec.sample_period:g} s, but the log {str(path)!r} "
                           f"is sampled every {dt:g} s")
+    check = check_motion_bounds(q, spec)
+    result = {
+        "scenario": f"identify-{Path(path).stem}", "kind": "identify", "robot": str(urdf), "source": str(path),
+        "samples": int(q.shape[0]), "dt": dt, "joints": list(robot.joint_names), "parameters": list(base.names),
+        "parameter_expressions": list(base.expressions), "parameter_units": list(base.units),
+        "standard_parameters": list(robot.names), "true": None, "rows": 0, "prior": prior_info,
+        "error_model": {**spec.to_dict(), "file": str(spec_path)}, "consistent": None,
+        "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,
+                            "singular_gap": base.singular_gap},
+    }
+    result["error_model"]["sources"].update(stated_assumptions(spec))
+    if check.contradicted:  # a false premise: no equation, no box
+        result.update(consistent=False, methods={"certified": contradicted_entry(check, f"--spec {spec_path}")},
+                      certified={"spec_check": check.to_dict()})
+        return _write(out, result)
     try:
         eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
                                 stride=kernel["stride"], kernel_shape=kernel["kernel_shape"])
     except ValueError as exc:
         raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None
-    check = check_motion_bounds(q, spec, span=3)
+    if len(eq) <= len(base):
+        raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {len(eq)} rows ({eq.info['windows']} kernel "
+                          f"windows x {nj} joints) must exceed the {len(base)} base parameters: a longer log or a "
+                          "smaller [certified] stride")
+    result["rows"] = len(eq)
     prior = ident.Box(np.asarray(prior_info["lower"]), np.asarray(prior_info["upper"]), names=base.names)
     entry: dict = {"kind": "guaranteed", "rigorous": True}
-    result = {
-        "scenario": f"identify-{Path(path).stem}", "kind": "identify", "robot": str(urdf), "source": str(path),
-        "samples": int(q.shape[0]), "dt": dt, "joints": list(robot.joint_names), "parameters": list(base.names),
-        "parameter_expressions": list(base.expressions), "parameter_units": list(base.units),
-        "standard_parameters": list(robot.names), "true": None, "rows": len(eq), "prior": prior_info,
-        "error_model": {**spec.to_dict(), "file": str(spec_path)}, "consistent": None,
-        "base_parameters": {"count": len(base), "standard_count": robot.n_parameters,
-                            "singular_gap": base.singular_gap},
-    }
     t1 = time.perf_counter()
     try:
         box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]),
@@ -126,13 +143,33 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     theta_abs = (np.maximum(np.abs(box.lower), np.abs(box.upper)) if box is not None
                  else np.maximum(np.abs(prior.lower), np.abs(prior.upper)))
     result["methods"] = {"certified": entry}
+    at = "the certified box's largest |theta|" if box is not None else "the prior's largest |theta|"
     result["certified"] = {
         "rows": len(eq), "kernel": {k: eq.info[k] for k in ("kernel", "half_width", "stride", "window_seconds",
                                                              "secant_half_span")},
         "geometry": eq.info["geometry"], **eq.summary(theta_abs),
         "terms_at": "|theta| = the certified box's largest magnitudes (the prior's when the set is empty)",
+        "row_radius": row_radius_summary(eq.bound, eq.D, theta_abs, at),
         "spec_check": check.to_dict(), "seconds": {"equation": eq.info["seconds"], "total": time.perf_counter() - t0},
     }
+    if box is not None:
+        result["certified"]["prior_diagnosis"] = prior_diagnosis(base.names, rel, eq.terms, theta_abs, eq.y,
+                                                                 SERIAL_HINTS)
+    return _write(out, result)
+
+
+def stated_assumptions(spec) -> dict:
+    """What the serial certified equation states without proving it (:mod:`ident.robots.serial_certified`'s
+    docstring), entry -> source, for ``error_model.sources``."""
+    out = {"pinocchio_float": "stated, not proven: pinocchio's floating-point error is below 1e-12 of the "
+                              "magnitudes summed (the rows' float term)"}
+    if spec.torque_timing == "sample" and spec.torque_rate is None:
+        out["torque_between_samples"] = ("stated, not proven: between samples the torque stays within torque_error "
+                                         "of the samples' linear interpolation (no torque_rate)")
+    return out
+
+
+def _write(out, result: dict) -> dict:
     with OwnedFolder(out, what={"scenario": result["scenario"], "kind": "identify"}) as tmp:
         write_json(tmp / "result.json", result)
     return result

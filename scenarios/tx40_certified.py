@@ -30,7 +30,7 @@ DEFAULTS = {
         "sample_period": 2e-4, "significant_digits": 5, "torque_timing": "sample",
         "torque_error": [3.96, 3.96, 3.1, 1.38, 1.3, 0.92],
         "qd_max": [9.69, 8.29, 10.21, 18.06, 19.81, 27.49],
-        "qdd_max": [300.0, 250.0, 400.0, 300.0, 350.0, 700.0],
+        "qdd_max": [1200.0, 950.0, 2000.0, 1600.0, 1700.0, 2400.0],
         "model_error": 0.0,
         "sources": {
             "sample_period": "TX40_config.yaml ts (5 kHz), a fact of the log",
@@ -42,8 +42,9 @@ DEFAULTS = {
                             "constant and ripple of current-derived torques); the width's sensitivity is reported",
             "qd_max": "Staubli TX40 data sheet nominal joint speeds (555, 475, 585, 1035, 1135, 1575 deg/s); "
                       "checked against the data (only checked: the radii use the step's own speed bound)",
-            "qdd_max": "stated: about twice the largest |qdd| the data prove (second differences over 3 samples, "
-                       "minus the position error), per joint; checked against the data",
+            "qdd_max": "stated: about twice the largest |qdd| the data prove (586, 468, 999, 781, 844, 1171 "
+                       "rad/s^2: second differences over every span, minus the position error, all at a span of one "
+                       "0.2 ms step), per joint; checked against the data",
             "model_error": "stated: 0 (the rigid-body model with viscous + Coulomb friction is assumed exact)",
         },
     },
@@ -102,7 +103,10 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
     "certified": ...}`` (JSON-ready; the schema is in ``docs/results.md``).
     """
     from h4bench import ident
-    from h4bench.ident.robots.serial_certified import certified_equation, check_motion_bounds
+    from h4bench.ident.processing.motion_check import check_motion_bounds
+    from h4bench.ident.robots.serial_certified import certified_equation
+    from h4bench.scenarios.certified_verdict import SERIAL_HINTS, prior_diagnosis, row_radius_summary
+    from h4bench.scenarios.identify_serial_certified import stated_assumptions
     from h4bench.scenarios.tx40_steps import jsonable
 
     progress = progress or (lambda *a: None)
@@ -114,7 +118,15 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
     n1 = s.n1 if not cc["max_samples"] else min(s.n1, int(cc["max_samples"]))
     n2 = s.n - s.n1 if not cc["max_samples"] else min(s.n - s.n1, max(int(cc["max_samples"]) // 2, 3000))
     e = joint_position_error(spec, s.log.q_motor[:s.n])
-    check = check_motion_bounds(s.q, spec, span=3, position_error=e)
+    check = check_motion_bounds(s.q[:s.n], spec, position_error=e[:s.n])
+    if check.contradicted:  # a false premise: no equation, no box (as identify --spec)
+        from h4bench.scenarios.certified_verdict import contradicted_entry
+
+        em = spec.to_dict()
+        em["sources"].update(stated_assumptions(spec))
+        return jsonable({"entry": {**contradicted_entry(check, "tx40.error_model"), "rows": 0, "rows_heldout": 0,
+                                   "seconds": time.perf_counter() - t0},
+                         "error_model": em, "certified": {"spec_check": check.to_dict()}})
     kw = {"half_width": int(cc["half_width"]), "stride": int(cc["stride"])}
     eq = certified_equation(s.robot, s.base, s.q[:n1], s.tau[:n1], spec, position_error=e[:n1],
                             progress=lambda i, n: progress("certified equation", i, 2 * n), **kw)
@@ -175,11 +187,17 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
         "wls_residual_max_per_joint": [float(np.max(np.abs((eq.y - eq.Wc @ s.w.theta)[eq.joint == j])))
                                        for j in range(6)],
         "torque_error_sweep": sweep,
+        "row_radius": row_radius_summary(eq.bound, eq.D, theta_abs, "the certified box's largest |theta|"
+                                         if box1 is not None else "the prior's largest |theta|"),
         "spec_check": check.to_dict(),
         "position_error_max_per_joint": e[:s.n].max(axis=0).tolist(),
         "seconds": {"equations": t_eq, "hulls": t_hull},
     }
+    if box1 is not None:
+        certified["prior_diagnosis"] = prior_diagnosis(s.base.names, box1.width / (s.bhi - s.blo), eq.terms,
+                                                       theta_abs, eq.y, SERIAL_HINTS)
     em = spec.to_dict()
+    em["sources"].update(stated_assumptions(spec))
     em["position_error_note"] = "5 significant digits of the MOTOR angles, mapped to the joints through |R^-1|"
     return jsonable({"entry": entry, "error_model": em, "certified": certified})
 
@@ -189,10 +207,16 @@ def report_lines(result: dict) -> list[str]:
     c, m = result.get("certified"), result["methods"].get("certified")
     if not c or not m:
         return []
+    if m["status"] == "spec_contradicted":
+        return ["", "## Certified box (derived error model)", "",
+                "**No certified box: the data contradict the stated motion bounds** (the radii rest on them):", "",
+                *(f"- {line}" for line in m["contradicted"])]
     lines = ["", "## Certified box (derived error model)", "",
              f"{c['rows']} identification rows, {c['rows_heldout']} held-out rows (triangle kernel of "
              f"{c['kernel']['window_seconds'] * 1e3:.0f} ms, a row every {c['kernel']['stride']} samples). Status: "
              f"{m['status']}."]
+    if m["status"] == "ok" and (c.get("prior_diagnosis") or {}).get("message"):
+        lines.append(c["prior_diagnosis"]["message"])
     if m["status"] == "ok":
         lines.append(f"Median width / prior {np.median(m['relative_width_to_prior']):.3g}; held-out coverage "
                      f"{m['heldout_coverage']:.4f}; WLS inside: {m['wls_inside']}"

@@ -31,7 +31,9 @@ entry                       unit      meaning
 
 ``sources`` says where each entry comes from (a data sheet, the file format, the simulator's settings, an
 assumption). The processing that uses the specification (the derived interval equation) reads only these
-entries; a simulation checks the stated motion bounds and the derived radii against its truth.
+entries; the stated motion bounds are checked against what the measured positions prove
+(:mod:`ident.processing.motion_check`: a bound below it is contradicted by the data), and a simulation checks
+them and the derived radii against its truth as well.
 
 A TOML file (``h4bench identify --spec FILE``) holds one table ``[error_model]`` with these keys (per-joint
 entries as one number or a list of n), an optional ``counts_per_turn`` instead of ``position_resolution``, and

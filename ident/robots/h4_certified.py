@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.processing.errorspec import ErrorSpec
-from h4bench.ident.processing.choice import check_kernel_steps, kernel_family, stack_equations
+from h4bench.ident.processing.choice import MIN_KERNEL_STEPS, check_kernel_steps, kernel_family, stack_equations
 from h4bench.ident.processing.weakform import (NonlinearSteps, coulomb_columns, imot_columns,
                                                make_kernel, nonlinear_rows, nonlinear_steps, row_windows,
                                                torque_rows, viscous_columns)
@@ -39,23 +39,41 @@ from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
 from h4bench.ident.robots.h4_jets import box_jets, point_jets
 
-__all__ = ["CURVATURE_FACTOR", "CertifiedEquation", "CertifiedSteps", "Processing", "certified_equation",
-           "certified_rows", "certified_steps", "curvature_bounds", "nacelle_terms"]
+__all__ = ["CURVATURE_FACTOR", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps", "Processing", "certified_equation",
+           "certified_rows", "certified_steps", "curvature_bounds", "nacelle_terms", "stated_assumptions"]
 
 CURVATURE_FACTOR = 2.0  # stated factor on the sampled second-derivative maxima (not proven; see module docstring)
 N_JOINTS = 4
+# What the derived equation states without proving it (module docstring), entry -> source
+STATED = {
+    "assembly_mode": "stated, not proven: the robot stays in the assembly mode that the forward kinematics of the "
+                     "measured positions gives (the interval jets verify the pose within that branch)",
+    "sin_cos": "stated, not proven: numpy's sin and cos are within 4 ulp (the interval jets widen by that much)",
+}
 
 
 @dataclass(frozen=True)
 class Processing:
     """The weak form's processing settings (a scenario's ``[certified]`` table): kernel length in sample steps
-    (None: chosen from the specification, :func:`certified_equation`), its shape, the stride between rows
-    [samples] and the sampling of the curvature bounds [steps]."""
+    (None: every kernel of :func:`ident.processing.choice.kernel_family`, rows stacked), its shape, the stride
+    between rows [samples] and the sampling of the curvature bounds [steps]."""
 
     kernel_steps: int | None = None
     kernel_shape: str = "hann"
     stride: int = 2
     curvature_every: int = 10
+
+    def __post_init__(self) -> None:
+        from h4bench.ident.processing.weakform import KERNEL_SHAPES  # noqa: PLC0415
+
+        for key in ("stride", "curvature_every"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{key} must be an integer >= 1, got {v!r}")
+        if self.kernel_steps is not None:
+            check_kernel_steps(self.kernel_steps)
+        if self.kernel_shape not in KERNEL_SHAPES:
+            raise ValueError(f"kernel_shape must be one of {KERNEL_SHAPES}, got {self.kernel_shape!r}")
 
 
 @dataclass(frozen=True)
@@ -69,6 +87,23 @@ class CertifiedEquation(IntervalEquation):
 
     names: tuple = PARAMETER_NAMES
     terms: dict = field(default_factory=dict, compare=False)
+
+
+def stated_assumptions(info: dict) -> dict:
+    """Every assumption a :class:`CertifiedEquation` rests on without proof, entry -> source: :data:`STATED`, the
+    fallback's ``curvature_factor`` (with the number of steps that used it) and the equation's own
+    ``info["not_proven"]`` (sampled curvature bounds x :data:`CURVATURE_FACTOR`, the torque between samples) as
+    ``not_proven_1``, ``not_proven_2``, ..."""
+    out = dict(STATED)
+    steps = info.get("steps", 0)
+    fallback = max(steps - info.get("encoder_boxes_proven", steps), steps - info.get("motion_boxes_proven", steps))
+    out["curvature_factor"] = (f"stated, not proven: a step whose box the interval jets cannot verify falls back to "
+                               f"second-derivative bounds sampled along the measured motion times "
+                               f"{info.get('curvature_factor', CURVATURE_FACTOR):g}; used on {fallback} of {steps} "
+                               "steps of this equation")
+    for i, what in enumerate(info.get("not_proven", []), start=1):
+        out[f"not_proven_{i}"] = f"stated, not proven: {what}"
+    return out
 
 
 def nacelle_terms(geometry, q, qd, x=None, x0=None):
@@ -156,7 +191,7 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
         family = kernel_family(q.shape[0], h, processing.stride)
         pairs = list(zip(family.steps, family.strides))
     else:
-        pairs = [(check_kernel_steps(processing.kernel_steps, "processing.kernel_steps"), processing.stride)]
+        pairs = [(int(processing.kernel_steps), processing.stride)]
     steps = certified_steps(geometry, q, spec, processing, position_error)
     eqs = [certified_rows(steps, make_kernel(L, h, processing.kernel_shape), row_windows(q.shape[0], L, st), tau)
            for L, st in pairs]
@@ -170,6 +205,9 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
                    curvature_every=processing.curvature_every)
     if processing.kernel_steps is None:
         eq.info["kernels"] = family.to_dict()
+    if len(eq) <= len(PARAMETER_NAMES):
+        raise ValueError(f"the log gives {len(eq)} rows ({eq.info['windows']} kernel windows, 4 joints), which must "
+                         f"exceed the {len(PARAMETER_NAMES)} parameters: a longer log or a smaller stride")
     return eq
 
 

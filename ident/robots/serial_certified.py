@@ -67,6 +67,7 @@ import numpy as np
 
 from h4bench.ident.numerics.interval import up
 from h4bench.ident.processing.errorspec import ErrorSpec
+from h4bench.ident.processing.motion_check import SpecCheck, check_motion_bounds
 from h4bench.ident.processing.weakform import (
     RowWindows,
     coulomb_columns,
@@ -346,41 +347,4 @@ def certificate(eq: CertifiedEquation, W_true, y_true, theta_true) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- spec check
-@dataclass(frozen=True)
-class SpecCheck:
-    """Proven lower bounds of the true motion's max |qd|, max |qdd| per joint from the data, against the spec."""
-
-    qd_lower: np.ndarray
-    qdd_lower: np.ndarray
-    qd_max: np.ndarray
-    qdd_max: np.ndarray
-
-    @property
-    def contradicted(self) -> list[str]:
-        out = [f"qd_max of joint {i + 1} ({self.qd_max[i]:.4g} rad/s < {self.qd_lower[i]:.4g} proven by the data)"
-               for i in np.flatnonzero(self.qd_lower > self.qd_max)]
-        out += [f"qdd_max of joint {i + 1} ({self.qdd_max[i]:.4g} rad/s^2 < {self.qdd_lower[i]:.4g} proven by the "
-                f"data)" for i in np.flatnonzero(self.qdd_lower > self.qdd_max)]
-        return out
-
-    def to_dict(self) -> dict:
-        return {"qd_lower": self.qd_lower.tolist(), "qdd_lower": self.qdd_lower.tolist(),
-                "qd_max": self.qd_max.tolist(), "qdd_max": self.qdd_max.tolist(), "contradicted": self.contradicted}
-
-
-def check_motion_bounds(q, spec: ErrorSpec, span: int = 20, position_error=None) -> SpecCheck:
-    """Lower bounds of the TRUE max |qd| and max |qdd| that the measured positions prove.
-
-    A secant over ``span`` steps is the mean of qd over it (true positions), so ``max|qd| >= |secant| - (e_a +
-    e_b) / (span dt)``; the second difference over ``span`` steps is a weighted mean of qdd, so ``max|qdd| >=
-    |second difference| - 4 e / (span dt)^2``. A stated bound below these is contradicted by the data.
-    position_error : (N, n) bound on the position error [rad], default ``spec.position_error(q)``.
-    """
-    q = np.asarray(q, dtype=float)
-    e = spec.position_error(q) if position_error is None else np.asarray(position_error, dtype=float)
-    h = span * spec.sample_period
-    sec = (q[span:] - q[:-span]) / h
-    qd_lo = np.max(np.abs(sec) - (e[span:] + e[:-span]) / h, axis=0)
-    d2 = (q[2 * span:] - 2 * q[span:-span] + q[:-2 * span]) / h**2
-    qdd_lo = np.max(np.abs(d2) - (e[2 * span:] + 2 * e[span:-span] + e[:-2 * span]) / h**2, axis=0)
-    return SpecCheck(np.maximum(qd_lo, 0.0), np.maximum(qdd_lo, 0.0), spec.qd_max.copy(), spec.qdd_max.copy())
+# The motion-bound check is shared by every robot kind: :mod:`ident.processing.motion_check` (re-exported here).

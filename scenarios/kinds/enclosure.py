@@ -65,21 +65,31 @@ def run(spec: dict, seed: int, out: Path, progress, only: int | None = None, fre
         return result
     runs, info = run_many(spec, seed, out, campaign_job, progress, fresh=fresh, report_imports=REPORT_IMPORTS)
     result = summarise(spec, seed, runs, info)
+    head: list[str] = []
     if spec["certified"]["enabled"]:
         certs = [r["certificate"] for r in runs]
+        failed = [f"run {r['index']} (seed {r['seed']}): {f}" for r in runs for f in r["certificate"].get("failed", [])]
         result["certificate"] = {
+            "status": "failed" if failed else "ok", "failed": failed,
             "runs": len(certs), "rows": int(sum(c["rows"] for c in certs)),
             "violations": int(sum(c["violations"] for c in certs)),
             "min_margin": float(min(c["min_margin"] for c in certs)),
             "max_actual_over_radius": float(max(c["checks"]["total"]["max_actual_over_radius"] for c in certs)),
             "width_vs_tuned_geomean": [r.get("width_vs_tuned_geomean") for r in runs]}
+        bad = sorted({r["index"] for r in runs if r["certificate"].get("status") == "failed"})
+        head = ([f"**Certified box: FAILED** in {len(bad)} of {len(runs)} runs ({bad}): a stated assumption or a "
+                 "row check does not hold, so those boxes are not certified:", "", *(f"- {f}" for f in failed[:20]),
+                 *([f"- ... {len(failed) - 20} more in result.json `certificate.failed`"] if len(failed) > 20 else []),
+                 ""] if failed else
+                [f"**Certified box: the certificate holds** in all {len(runs)} runs ({result['certificate']['rows']} "
+                 "rows, 0 violations, every stated assumption held by the truth).", ""])
     facts = [f"- runs: {result['runs']} (noise shapes {result['noise_shapes']}, true parameters randomised by "
              f"+-{100 * result['parameter_spread']:.0f} %); reused from an earlier start: {info['reused']}",
              f"- bound covers the oracle residual in {result['runs_bound_covers_residual']} of {result['runs']} runs "
              f"(max oracle residual {result['oracle_residual']:.4g} N m)"]
     tail = [f"Inspect one run (a miss, say) with its dataset and Rerun replay: `h4bench run {result['scenario']} "
             f"--seed {result['seed']} --only INDEX` (run INDEX has seed {result['seed']} + INDEX).", ""]
-    write_outputs(result, runs, out, "is the truth always enclosed?", facts, _method_line, tail)
+    write_outputs(result, runs, out, "is the truth always enclosed?", facts, _method_line, tail, head=head)
     return result
 
 

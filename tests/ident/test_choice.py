@@ -20,16 +20,19 @@ def test_kernel_family_grid():
     assert f.strides == tuple(max(2, L // STRIDE_DIVISOR) for L in f.steps)
     short = kernel_family(1001, 1e-3)  # at most a tenth of the log
     assert max(short.steps) <= 100 and min(short.steps) >= MIN_KERNEL_STEPS
-    assert kernel_family(101, 1e-3).steps == (MIN_KERNEL_STEPS,)  # a short log keeps the shortest accepted kernel
-    assert kernel_family(4001, 2e-4).steps[0] == 200  # the same durations at another sample rate
+    assert kernel_family(201, 1e-3).steps == (MIN_KERNEL_STEPS,)  # a short log keeps the shortest accepted kernel
+    assert kernel_family(12001, 2e-4).steps[0] == 200  # the same durations at another sample rate
     with pytest.raises(ValueError, match="stride must be an integer >= 1, got 0"):
         kernel_family(1000, 1e-3, 0)
 
 
 def test_check_kernel_steps_names_the_argument():
     assert check_kernel_steps(40) == 40
-    for bad in (7, 19, 2.5, True, "40"):
-        with pytest.raises(ValueError, match=r"kernel_steps must be an integer >= 20 .* got"):
+    for bad in (7, 20, 39):
+        with pytest.raises(ValueError, match=rf"kernel_steps must be >= 40 sample steps, got {bad}: .* at its prior"):
+            check_kernel_steps(bad)
+    for bad in (2.5, True, "40"):
+        with pytest.raises(ValueError, match="kernel_steps must be an integer number of sample steps"):
             check_kernel_steps(bad)
 
 
@@ -65,7 +68,7 @@ def test_h4_family_stacks_each_kernels_rows(h4_log):
             np.testing.assert_array_equal(eq.terms[k][sl], v)
         rows += len(one)
     assert rows == len(eq) == eq.info["rows"]
-    with pytest.raises(ValueError, match=r"processing.kernel_steps must be an integer >= 20 .* got 7"):
+    with pytest.raises(ValueError, match=r"kernel_steps must be >= 40 sample steps, got 7"):
         hc.certified_equation(geometry, q, tau, spec, hc.Processing(kernel_steps=7))
 
 

@@ -4,6 +4,7 @@ motion or the encoder error is caught by the truth); no allowance is read."""
 import copy
 import json
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -162,3 +163,145 @@ def test_sample_instant_torques_add_the_rate_term_or_state_the_assumption(run_an
     assert not any("torque between samples" in s for s in sampled.info["not_proven"])
     stated = certified_equation(run_.geometry, q[:n], tau[:n], dataclasses.replace(es, torque_timing="sample"))
     assert any("torque between samples" in s for s in stated.info["not_proven"])
+
+
+def _h4_log(run_, tmp_path, n=None):
+    ds = run_.dataset
+    n = n or len(ds)
+    log = tmp_path / "log.csv"
+    np.savetxt(log, np.column_stack([ds.t[:n], ds.q[:n], ds.tau[:n]]), delimiter=",", comments="", fmt="%.17g",
+               header="t,q1,q2,q3,q4,tau1,tau2,tau3,tau4")
+    return log
+
+
+def _h4_spec(tmp_path, run_, spec, counts=20000, certified="kernel_steps = 100\ncurvature_every = 20", **stated):
+    es = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
+    qd, qdd = stated.get("qd_max", es.qd_max), stated.get("qdd_max", es.qdd_max)
+    path = tmp_path / "spec.toml"
+    path.write_text(f"[error_model]\nsample_period = 0.001\ncounts_per_turn = {counts}\n"
+                    f"torque_error = {run_.noise_bound!r}\nqd_max = {list(map(float, qd))}\n"
+                    f"qdd_max = {list(map(float, qdd))}\n[certified]\n{certified}\n")
+    return path
+
+
+@pytest.mark.parametrize("entry, factor", [("qdd_max", None), ("qdd_max", 0.7), ("qd_max", 0.7)])
+def test_identify_h4_refuses_an_understated_motion_bound(run_and_spec, tmp_path, entry, factor):
+    """qdd_max = 10 rad/s^2 (the truth reaches 400-660) or 0.7 x the true peak: exit 3, every joint named with
+    the stated value and the proven bound (which never exceeds the truth); result.json without a box (the H4's
+    identify --spec once exited 0 here, status ok)."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    run_, spec = run_and_spec
+    true = np.abs(run_.truth.qdd if entry == "qdd_max" else run_.truth.qd).max(axis=0)  # read only to check
+    stated = np.full(4, 10.0) if factor is None else factor * true
+    spec_file = _h4_spec(tmp_path, run_, spec, **{entry: stated})
+    res = CliRunner().invoke(app, ["identify", str(_h4_log(run_, tmp_path)), "--spec", str(spec_file), "--out",
+                                   str(tmp_path / "o")])
+    assert res.exit_code == 3, res.output
+    unit = "rad/s^2" if entry == "qdd_max" else "rad/s"
+    out = " ".join(res.output.split())
+    for j in range(4):
+        assert (f"--spec {spec_file}: {entry} of joint {j + 1} = {stated[j]:.6g} {unit} is contradicted by the data: "
+                f"the positions prove max |{entry[:-4]}| >= ") in out
+    r = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert r["methods"]["certified"]["status"] == "spec_contradicted" and "lower" not in r["methods"]["certified"]
+    assert r["consistent"] is False
+    proven = np.asarray(r["certified"]["spec_check"][entry[:-4] + "_lower"])
+    assert np.all(proven <= true) and np.all(proven > 0.85 * true)
+
+
+@pytest.mark.parametrize("table, words", [
+    ("kernel_steps = 7", ["kernel_steps must be >= 40", "leave every parameter at its prior"]),
+    ("kernel_shape = 'box'", ["kernel_shape must be one of"]),
+    ("stride = 0", ["stride must be an integer >= 1"]),
+    ("curvature_every = 0", ["curvature_every must be an integer >= 1"]),
+])
+def test_identify_h4_certified_table_errors_name_spec_file_and_key(run_and_spec, tmp_path, table, words):
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    run_, spec = run_and_spec
+    spec_file = _h4_spec(tmp_path, run_, spec, certified=table)
+    res = CliRunner().invoke(app, ["identify", str(_h4_log(run_, tmp_path, 300)), "--spec", str(spec_file),
+                                   "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2, res.output
+    out = " ".join(res.output.split())
+    assert f"--spec {spec_file}: [certified]" in out and all(w in out for w in words), out
+
+
+def test_identify_h4_with_a_coarse_encoder_says_what_leaves_the_prior(run_and_spec, tmp_path):
+    """4 096 counts per turn: the box stays at the prior, and the result says which parameters, which radius term
+    dominates (the truncation of the Mnac and Ibc columns, radii of 1e6 N m per unit parameter), and what would
+    help; the row radius is labelled by its parts (no bare bound_processed); the statements are in sources."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    run_, spec = run_and_spec
+    spec_file = _h4_spec(tmp_path, run_, spec, counts=4096)
+    res = CliRunner().invoke(app, ["identify", str(_h4_log(run_, tmp_path, 800)), "--spec", str(spec_file),
+                                   "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    r = json.loads((tmp_path / "o" / "result.json").read_text())
+    diag = r["certified"]["prior_diagnosis"]
+    assert len(diag["parameters"]) == 14 and diag["dominant"] == "truncation"
+    assert {c["name"] for c in diag["columns"]} <= {"Mnac", "Ibc"}
+    assert max(c["max_radius_per_unit"] for c in diag["columns"]) > 1e5
+    out = " ".join(res.output.split())
+    assert "warning: 14 of 14 parameters stay at the prior" in out and "finer encoder" in out
+    assert "bound_processed" not in r and "bound_processed" not in res.output
+    rr = r["certified"]["row_radius"]
+    assert rr["torque_side_max"] == pytest.approx(run_.noise_bound, rel=1e-9) and rr["total_median"] > 1e3
+    assert "certified row radius: torque side" in out
+    src = r["error_model"]["sources"]
+    assert src["assembly_mode"].startswith("stated, not proven") and src["sin_cos"].startswith("stated, not proven")
+    steps = r["certified"]["steps"]
+    assert src["curvature_factor"].endswith(f"times 2; used on 0 of {steps} steps of this equation")
+
+
+def test_a_failed_certificate_names_the_assumption_first(run_and_spec, tmp_path):
+    """qd_max = 3 rad/s (the truth reaches 9-15.5): the certificate's status is failed and names each joint's
+    stated and true value; the report's first lines say so; the command's check exits 1."""
+    import typer
+
+    from h4bench.scenarios.certificate import verdict_lines
+    from h4bench.scenarios.cli_certified import exit_if_certificate_failed
+
+    run_, spec = run_and_spec
+    cert = _short(run_, spec, n=3000, qd_max=np.full(4, 3.0))
+    true = np.abs(run_.truth.qd[:3000]).max(axis=0)
+    assert cert["status"] == "failed"
+    for j in range(4):
+        assert f"qd_max of joint {j + 1} = 3 rad/s is below the simulated truth's max |qd| = {true[j]:.6g} rad/s" \
+            in cert["failed"]
+    lines = verdict_lines({"certificate": cert, "methods": {"certified": {"status": "ok", "all_enclosed": True}}})
+    assert lines[0].startswith("**Certified box: FAILED**") and lines[2].startswith("- qd_max of joint 1 = 3 rad/s")
+    with pytest.raises(typer.Exit) as exc:
+        exit_if_certificate_failed({"certificate": cert})
+    assert exc.value.exit_code == 1
+    held = _short(run_, spec)
+    assert held["status"] == "ok" and held["failed"] == []
+    assert verdict_lines({"certificate": held, "methods": {"certified": {"status": "ok", "all_enclosed": True}}})[0] \
+        .startswith("**Certified box: encloses the truth** (ok); the certificate holds")
+    weak = _short(run_, spec, torque_error=np.full(4, 0.1))
+    assert any(f.startswith("torque_error of joint 1 = 0.1 N m is below the simulated truth's injected")
+               for f in weak["failed"])
+
+
+@pytest.mark.slow
+def test_run_certified_with_an_understated_qd_max_exits_1(tmp_path):
+    """`h4bench run certified --quick` with [error_model] qd_max = 3: exit 1, report.md opens with the failure."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    toml = tmp_path / "qd3.toml"
+    text = (Path(__file__).resolve().parents[2] / "scenarios" / "certified.toml").read_text()
+    toml.write_text(text.replace("qd_max = 0.0", "qd_max = 3.0"))
+    res = CliRunner().invoke(app, ["run", str(toml), "--quick", "--out", str(tmp_path / "r")])
+    assert res.exit_code == 1, res.output
+    first = (tmp_path / "r" / "report.md").read_text().splitlines()
+    assert first[0].startswith("**Certified box: FAILED**") and first[2].startswith("- qd_max of joint 1 = 3 rad/s")

@@ -71,6 +71,17 @@ def test_identify_spec_encloses_the_truth(synthetic_csv):
     assert r["error_model"]["sources"]["torque_error"].startswith("the synthetic")
     assert r["certified"]["spec_check"]["contradicted"] == [] and r["certified"]["rows"] > 0
     assert json.loads((d / "out" / "result.json").read_text())["methods"]["certified"]["lower"] == m["lower"]
+    # what rests on statements is listed with its source; the row radius is named by its parts
+    assert r["error_model"]["sources"]["pinocchio_float"].startswith("stated, not proven")
+    rr = r["certified"]["row_radius"]
+    assert rr["torque_side_max"] <= rr["total_max"] and rr["torque_side_median"] <= rr["total_median"]
+    # the parameters left at the prior are named with the term that dominates and what would help
+    diag = r["certified"]["prior_diagnosis"]
+    at_prior = [n for n, w in zip(r["parameters"], m["relative_width_to_prior"]) if w >= 0.99]
+    assert diag["parameters"] == at_prior and diag["dominant"] in r["certified"]["terms"]
+    if at_prior:
+        assert diag["message"].startswith(f"{len(at_prior)} of {len(theta)} parameters stay at the prior")
+        assert f"dominated by the {diag['dominant']} term" in diag["message"] and "What would help" in diag["message"]
 
 
 @pytest.mark.parametrize("extra, spec_text, word", [
@@ -137,3 +148,73 @@ def test_run_tx40_derived_quick(tmp_path):
     doc = (Path(__file__).resolve().parents[2] / "docs" / "results.md").read_text()
     undocumented = [k for k in [*c, *m] if f".{k}`" not in doc and f"`{k}`" not in doc]
     assert not undocumented, f"certified keys not in docs/results.md: {undocumented}"
+
+
+def _spec_with(toml, tmp_path, **entries):
+    """The synthetic log's spec file with [error_model] entries replaced."""
+    text = toml.read_text()
+    for key, value in entries.items():
+        lines = [line for line in text.splitlines() if not line.startswith(f"{key} =")]
+        i = lines.index("[error_model]") + 1
+        lines.insert(i, f"{key} = {value}")
+        text = "\n".join(lines) + "\n"
+    path = tmp_path / "spec.toml"
+    path.write_text(text)
+    return path
+
+
+def _true_peaks():
+    """The synthetic log's true max |qd|, |qdd| per joint (the analytic motion on a 100x finer grid)."""
+    from test_serial_certified import _trajectory
+
+    traj, _, _ = _trajectory(0)
+    _, qd, qdd = traj(np.linspace(0, 1.2, 120001))
+    return np.abs(qd).max(axis=0), np.abs(qdd).max(axis=0)
+
+
+@pytest.mark.parametrize("entry", ["qdd_max", "qd_max"])
+def test_an_understated_motion_bound_exits_3_naming_it(synthetic_csv, tmp_path, entry):
+    """qdd_max (or qd_max) stated at 0.7 x the true peak: refused with exit 3 on every joint, the message naming
+    --spec, the file, the entry, the joint, the stated value and the proven bound; result.json written with
+    status spec_contradicted and no box (the check once used spans of 3 steps only and proved 0 rad/s^2)."""
+    csv, toml, _, _ = synthetic_csv
+    qd_true, qdd_true = _true_peaks()
+    stated = 0.7 * (qdd_true if entry == "qdd_max" else qd_true)
+    spec = _spec_with(toml, tmp_path, **{entry: [float(v) for v in stated]})
+    res = CliRunner().invoke(app, ["identify", str(csv), "--urdf", URDF, "--coupled-wrist", "5,6", "--spec",
+                                   str(spec), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 3, res.output
+    unit = "rad/s^2" if entry == "qdd_max" else "rad/s"
+    for j in range(6):
+        assert (f"--spec {spec}: {entry} of joint {j + 1} = {stated[j]:.6g} {unit} is contradicted by the data: "
+                f"the positions prove max |{entry[:-4]}| >= ") in res.output
+    r = json.loads((tmp_path / "o" / "result.json").read_text())
+    m = r["methods"]["certified"]
+    assert m["status"] == "spec_contradicted" and "lower" not in m and r["consistent"] is False
+    check = r["certified"]["spec_check"]
+    lower = np.asarray(check["qdd_lower" if entry == "qdd_max" else "qd_lower"])
+    truth = qdd_true if entry == "qdd_max" else qd_true
+    assert np.all(lower <= truth) and np.all(lower >= 0.9 * truth)  # every joint proven, none overstated
+
+
+@pytest.mark.parametrize("table, key", [("kernel_shape = 'box'", "kernel_shape"), ("stride = 0", "stride"),
+                                        ("refine = -1", "refine"), ("kernel_steps = 2", "kernel_steps")])
+def test_certified_table_errors_name_spec_file_and_key(synthetic_csv, tmp_path, table, key):
+    csv, toml, _, _ = synthetic_csv
+    text = toml.read_text().replace("[certified]\n", f"[certified]\n{table}\n")
+    text = "\n".join(line for line in text.splitlines() if not (line.startswith(f"{key} =") and line != table))
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text + "\n")
+    res = CliRunner().invoke(app, ["identify", str(csv), "--urdf", URDF, "--spec", str(bad), "--out",
+                                   str(tmp_path / "o")])
+    assert res.exit_code == 2, res.output
+    assert f"--spec {bad}" in " ".join(res.output.split()) and f"[certified].{key}" in res.output
+
+
+def test_too_few_rows_for_the_parameters_are_refused(synthetic_csv, tmp_path):
+    csv, toml, _, _ = synthetic_csv
+    spec = tmp_path / "spec.toml"
+    spec.write_text(toml.read_text().replace("stride = 40", "stride = 5000"))
+    res = CliRunner().invoke(app, ["identify", str(csv), "--urdf", URDF, "--coupled-wrist", "5,6", "--spec",
+                                   str(spec), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "must exceed the" in res.output and "base parameters" in res.output
