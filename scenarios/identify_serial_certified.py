@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from h4bench import ident
+from h4bench.ident.processing.choice import check_kernel_steps
 from h4bench.scenarios.certified_verdict import (SERIAL_HINTS, contradicted_entry, prior_diagnosis,
                                                  row_radius_summary)
 from h4bench.scenarios.identify import OptionError, read_serial_log, urdf_robot_and_prior
@@ -27,16 +28,15 @@ from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_
 
 __all__ = ["identify_urdf_spec", "read_kernel"]
 
-KERNEL_SECONDS = 0.08  # default kernel length [s] (an 80 ms triangle), rounded to an even number of steps
 STRIDE_SECONDS = 0.02  # default row spacing [s]
 REFINE_RTOL = 0.02  # stop refining when the widths' geometric mean shrank by less than this in a round
 _KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "refine": int}
-MIN_KERNEL_STEPS = 4  # the serial certified equation's smallest half-width is 2 steps
 
 
 def read_kernel(spec_path, dt: float) -> dict:
-    """The optional ``[certified]`` table of the spec file for a serial robot: ``kernel_steps`` (even, >= 4;
-    default 0.08 s), ``kernel_shape`` (``triangle`` or ``hann``), ``stride`` [samples] (default 0.02 s),
+    """The optional ``[certified]`` table of the spec file for a serial robot: ``kernel_steps`` (even, >=
+    :data:`ident.processing.choice.MIN_KERNEL_STEPS`; default None: the rows of every kernel of the serial family,
+    :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle`` or ``hann``), ``stride`` [samples] (default 0.02 s),
     ``refine`` (default 3); the H4's ``curvature_every`` does not apply. Errors name ``--spec`` and the file."""
     path = Path(spec_path)
     try:
@@ -46,16 +46,19 @@ def read_kernel(spec_path, dt: float) -> dict:
     if not isinstance(table, dict) or set(table) - set(_KEYS):
         raise OptionError(f"--spec {path} [certified]: with --urdf expected some of {sorted(_KEYS)}, got "
                           f"{sorted(table) if isinstance(table, dict) else table!r}")
-    out = {"kernel_steps": 2 * max(2, int(round(KERNEL_SECONDS / dt / 2))), "kernel_shape": "triangle",
-           "stride": max(1, int(round(STRIDE_SECONDS / dt))), "refine": 3, **table}
+    out = {"kernel_steps": None, "kernel_shape": "triangle", "stride": max(1, int(round(STRIDE_SECONDS / dt))),
+           "refine": 3, **table}
     for k, kind in _KEYS.items():
-        if isinstance(out[k], bool) or not isinstance(out[k], kind):
+        if not (k == "kernel_steps" and out[k] is None) and (isinstance(out[k], bool) or not isinstance(out[k], kind)):
             raise OptionError(f"--spec {path} [certified].{k} must be {kind.__name__}, got {out[k]!r}")
-    if out["kernel_steps"] < MIN_KERNEL_STEPS or out["kernel_steps"] % 2:
-        raise OptionError(f"--spec {path} [certified].kernel_steps must be an even integer >= {MIN_KERNEL_STEPS}, got "
-                          f"{out['kernel_steps']!r}: the kernel is two halves of kernel_steps / 2 steps each, and "
-                          f"shorter kernels multiply the position error on the acceleration columns by about "
-                          f"4 / (kernel_steps / 2 dt)^2 per unit parameter")
+    if out["kernel_steps"] is not None:
+        try:
+            check_kernel_steps(out["kernel_steps"])
+        except ValueError as exc:
+            raise OptionError(f"--spec {path} [certified].{exc}") from None
+        if out["kernel_steps"] % 2:
+            raise OptionError(f"--spec {path} [certified].kernel_steps must be even (a triangle of two halves of "
+                              f"kernel_steps / 2 steps), got {out['kernel_steps']!r}")
     if out["kernel_shape"] not in ("triangle", "hann"):
         raise OptionError(f"--spec {path} [certified].kernel_shape must be triangle or hann, got "
                           f"{out['kernel_shape']!r}")
@@ -75,7 +78,7 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
     from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
     from h4bench.ident.processing.motion_check import check_motion_bounds
-    from h4bench.ident.robots.serial_certified import certified_equation
+    from h4bench.ident.robots.serial_certified import certified_equation, certified_family
 
     t0 = time.perf_counter()
     robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,
@@ -111,8 +114,12 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
                       certified={"spec_check": check.to_dict()})
         return _write(out, result)
     try:
-        eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
-                                stride=kernel["stride"], kernel_shape=kernel["kernel_shape"])
+        if kernel["kernel_steps"] is None:
+            eq = certified_family(robot, base, q, tau, spec, stride=kernel["stride"],
+                                  kernel_shape=kernel["kernel_shape"])
+        else:
+            eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
+                                    stride=kernel["stride"], kernel_shape=kernel["kernel_shape"])
     except ValueError as exc:
         raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None
     if len(eq) <= len(base):
@@ -145,8 +152,8 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     result["methods"] = {"certified": entry}
     at = "the certified box's largest |theta|" if box is not None else "the prior's largest |theta|"
     result["certified"] = {
-        "rows": len(eq), "kernel": {k: eq.info[k] for k in ("kernel", "half_width", "stride", "window_seconds",
-                                                             "secant_half_span")},
+        "rows": len(eq), "kernel": {k: eq.info.get(k) for k in ("kernel", "half_width", "stride", "window_seconds",
+                                                                 "secant_half_span", "kernels")},
         "geometry": eq.info["geometry"], **eq.summary(theta_abs),
         "terms_at": "|theta| = the certified box's largest magnitudes (the prior's when the set is empty)",
         "row_radius": row_radius_summary(eq.bound, eq.D, theta_abs, at),

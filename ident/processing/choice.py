@@ -48,15 +48,18 @@ STRIDE_DIVISOR = 16  # a kernel of L steps takes rows every max(stride, L // STR
 
 @dataclass(frozen=True)
 class KernelFamily:
-    """steps : kernel lengths [sample steps], increasing; strides : the row stride of each [samples]."""
+    """steps : kernel lengths [sample steps], increasing; strides : the row stride of each [samples]; seconds :
+    the grid's (shortest, longest) length [s]; factor : its ratio."""
 
     steps: tuple[int, ...]
     strides: tuple[int, ...]
+    seconds: tuple[float, float] = (SHORTEST_S, LONGEST_S)
+    factor: float = FACTOR
 
     def to_dict(self) -> dict:
         return {"steps": list(self.steps), "strides": list(self.strides),
-                "rule": "every kernel of a geometric grid (factor 1.6) from "
-                        f"{SHORTEST_S:g} s to {LONGEST_S:g} s (at most a tenth of the log), rows stacked; stride "
+                "rule": f"every kernel of a geometric grid (factor {self.factor:g}) from {self.seconds[0]:g} s to "
+                        f"{self.seconds[1]:g} s (at most a tenth of the log), rows stacked; stride "
                         f"max(stride, L // {STRIDE_DIVISOR})"}
 
 
@@ -72,13 +75,19 @@ def check_kernel_steps(steps, name: str = "kernel_steps") -> int:
     return int(steps)
 
 
-def kernel_family(n_samples: int, dt: float, stride: int = 1, *, even: bool = False) -> KernelFamily:
-    """The kernel family of a log of ``n_samples`` samples every ``dt`` [s] (module docstring); ``even``: even
-    lengths only (a triangle's apex on a sample); ``stride`` : the stated row stride [samples] of the shortest."""
+def kernel_family(n_samples: int, dt: float, stride: int = 1, *, even: bool = False, shortest_s: float = SHORTEST_S,
+                  longest_s: float = LONGEST_S, factor: float = FACTOR) -> KernelFamily:
+    """The kernel family of a log of ``n_samples`` samples every ``dt`` [s] (module docstring): lengths from
+    ``shortest_s`` to ``longest_s`` [s] (at most a tenth of the log, at least :data:`MIN_KERNEL_STEPS` steps) on a
+    geometric grid of ratio ``factor``; ``even``: even lengths only (a triangle's apex on a sample); ``stride`` :
+    the stated row stride [samples] of the shortest."""
     if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
         raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
-    hi = max(MIN_KERNEL_STEPS, min(int(round(LONGEST_S / dt)), (n_samples - 1) // 10))
-    lo = max(MIN_KERNEL_STEPS, min(int(round(SHORTEST_S / dt)), hi))
+    if not (0 < shortest_s <= longest_s and factor > 1):
+        raise ValueError(f"need 0 < shortest_s <= longest_s and factor > 1, got {shortest_s!r}, {longest_s!r}, "
+                         f"{factor!r}")
+    hi = max(MIN_KERNEL_STEPS, min(int(round(longest_s / dt)), (n_samples - 1) // 10))
+    lo = max(MIN_KERNEL_STEPS, min(int(round(shortest_s / dt)), hi))
     steps: list[int] = []
     L = float(lo)
     while L <= hi * (1 + 1e-9):
@@ -86,8 +95,9 @@ def kernel_family(n_samples: int, dt: float, stride: int = 1, *, even: bool = Fa
         k += (k % 2) if even else 0
         if not steps or k > steps[-1]:
             steps.append(k)
-        L *= FACTOR
-    return KernelFamily(steps=tuple(steps), strides=tuple(max(stride, k // STRIDE_DIVISOR) for k in steps))
+        L *= factor
+    return KernelFamily(steps=tuple(steps), strides=tuple(max(stride, k // STRIDE_DIVISOR) for k in steps),
+                        seconds=(float(shortest_s), float(longest_s)), factor=float(factor))
 
 
 def stack_equations(eqs: list, info: dict):

@@ -76,11 +76,12 @@ from h4bench.ident.processing.weakform import (
     torque_rows,
     viscous_columns,
 )
+from h4bench.ident.processing.choice import kernel_family, stack_equations
 from h4bench.ident.robots.serial_steps import PARTS, inertial_rows
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
-__all__ = ["CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "check_motion_bounds",
-           "geometry_bounds", "secant_span"]
+__all__ = ["SERIAL_FAMILY", "CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "certified_family",
+           "check_motion_bounds", "geometry_bounds", "secant_span"]
 
 TERMS = ("position", "motion", "coulomb", "float", "torque", "model", "rounding")  # regressor side, then torque side
 
@@ -162,10 +163,41 @@ class CertifiedEquation:
                 "radius_median_per_joint": [float(np.median(total[self.joint == j])) for j in range(nj)]}
 
 
+#: the serial arms' kernel family (:func:`ident.processing.choice.kernel_family`): lengths 0.2 s and 0.4 s. Measured
+#: on a UR5 log (benchmarks/bench_serial_certified.py, 12 s at 1 kHz, 2^17 counts, seed 0; single kernels at
+#: 1af7ca8): width over the tuned hull's, median over the 58 base parameters, 5.75 at 0.08 s, 1.76 at 0.2 s, 1.80 at
+#: 0.4 s. Each kernel costs one pass of the per-step bounds, so the family is kept to two.
+SERIAL_FAMILY = {"shortest_s": 0.2, "longest_s": 0.4, "factor": 2.0}
+
+
+def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int, progress=None,
+                     **kwargs) -> CertifiedEquation:
+    """The rows of every kernel of the serial family (:data:`SERIAL_FAMILY`, even lengths), stacked: one true
+    interval equation (each kernel's is), whose hull lies in each kernel's. stride : the shortest kernel's row
+    spacing [steps]; other keywords as :func:`certified_equation`. ``info["kernels"]`` names the family."""
+    t0 = time.perf_counter()
+    fam = kernel_family(np.asarray(q).shape[0], spec.sample_period, int(stride), even=True, **SERIAL_FAMILY)
+    k = len(fam.steps)
+    eqs = []
+    for i, (L, st) in enumerate(zip(fam.steps, fam.strides)):
+        step = None if progress is None else (lambda d, t, i=i: progress(i * t + d, k * t))
+        eqs.append(certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st, progress=step,
+                                      **kwargs))
+    if k == 1:
+        eqs[0].info["kernels"] = fam.to_dict()
+        return eqs[0]
+    info = dict(eqs[0].info, half_width=None, stride=None, window_seconds=None, kernels=fam.to_dict(),
+                rows=sum(e.info["rows"] for e in eqs), windows=sum(e.info["windows"] for e in eqs),
+                coulomb_uncertain_share=float(np.mean([e.info["coulomb_uncertain_share"] for e in eqs])),
+                seconds=time.perf_counter() - t0)
+    return stack_equations(eqs, info)
+
+
 def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int, stride: int,
                        first_sample: int = 0, position_error=None, progress=None,
                        kernel_shape: str = "triangle", reference: bool = False) -> CertifiedEquation:
-    """The derived interval equation (module docstring) of a serial robot's log.
+    """The derived interval equation (module docstring) of a serial robot's log, for one kernel
+    (:func:`certified_family` stacks a family's).
 
     Parameters
     ----------

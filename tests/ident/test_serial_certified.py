@@ -193,3 +193,28 @@ def test_bad_inputs_are_named(robot, base):
         certified_equation(robot, base, q, q, ErrorSpec(n_joints=5, sample_period=DT, position_resolution=1e-5,
                                                         torque_error=1.0, qd_max=1.0, qdd_max=1.0),
                            half_width=10, stride=10)
+
+
+def test_family_stacks_each_kernels_rows(robot, base, monkeypatch):
+    """certified_family: the rows of each kernel of the family, as certified_equation gives them alone (the
+    oracle), stacked in the family's order; the family named in info. A short family (40 and 64 steps) keeps it
+    fast."""
+    from h4bench.ident.processing.choice import kernel_family
+    from h4bench.ident.robots import serial_certified as sc
+
+    monkeypatch.setattr(sc, "SERIAL_FAMILY", {"shortest_s": 0.04, "longest_s": 0.064, "factor": 1.6})
+    _, _, q, tau, spec = _log(robot, T=0.8)
+    fam = kernel_family(q.shape[0], DT, 10, even=True, **sc.SERIAL_FAMILY)
+    assert fam.steps == (40, 64)
+    eq = sc.certified_family(robot, base, q, tau, spec, stride=10)
+    assert eq.info["kernels"]["steps"] == [40, 64]
+    at = 0
+    for L, st in zip(fam.steps, fam.strides):
+        one = sc.certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st)
+        sl = slice(at, at + len(one))
+        for name in ("Wc", "D", "y", "bound", "joint", "window"):
+            np.testing.assert_array_equal(getattr(eq, name)[sl], getattr(one, name))
+        for k in one.terms:
+            np.testing.assert_array_equal(eq.terms[k][sl], one.terms[k])
+        at += len(one)
+    assert at == len(eq) == eq.info["rows"]
