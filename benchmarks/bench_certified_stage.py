@@ -1,0 +1,62 @@
+"""The H4's certified stage against its simulation stage: `run certified` as a campaign run spends it.
+
+For each seed, one `certified` experiment (quick by default): the simulation stage's seconds
+(``run_.timings["simulation"]``), the certified equation's, its box's (the Oettli-Prager hull) and the
+certificate's (the exact positions' equation and the row checks), each also as a multiple of the simulation
+stage; medians over the seeds. Wall and CPU time (a shared machine: compare ratios).
+
+    python benchmarks/bench_certified_stage.py [--full] [--seeds 0,1,2] [--out F.json]
+"""
+
+import _setup  # noqa: F401  (repository root on sys.path, --threads)
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def one(seed: int, quick: bool) -> dict:
+    from h4bench.scenarios.certificate import certify
+    from h4bench.scenarios.experiment import run_experiment
+    from h4bench.scenarios.registry import load_spec
+
+    spec = load_spec("certified", quick=quick)
+    run_ = run_experiment(spec, seed)
+    t0, c0 = time.perf_counter(), time.process_time()
+    extra = certify(run_, spec)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    entry, cert = extra["certified_entry"], extra["certificate"]
+    sim = run_.timings["simulation"]
+    eq, box, chk = entry["equation_seconds"], entry.get("seconds", 0.0), cert.get("seconds", 0.0)
+    return {"seed": seed, "simulation": sim, "equation": eq, "box": box, "certificate": chk, "certify_wall": wall,
+            "certify_cpu": cpu, "equation_over_simulation": eq / sim, "certificate_over_simulation": chk / sim,
+            "equation_and_certificate_over_simulation": (eq + chk) / sim,
+            "width_vs_tuned_geomean": extra["width_vs_tuned_geomean"], "violations": cert["violations"]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--full", action="store_true")
+    ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--threads", default=None)
+    a = ap.parse_args()
+    rows = []
+    for s in (int(x) for x in a.seeds.split(",")):
+        r = one(s, not a.full)
+        rows.append(r)
+        print(f"seed {s}: simulation {r['simulation']:.2f} s, equation {r['equation']:.2f} s, box {r['box']:.2f} s, "
+              f"certificate {r['certificate']:.2f} s; (equation + certificate) / simulation "
+              f"{r['equation_and_certificate_over_simulation']:.1f}; width/tuned {r['width_vs_tuned_geomean']:.4f}, "
+              f"violations {r['violations']}", flush=True)
+    med = {k: float(np.median([r[k] for r in rows])) for k in rows[0] if k != "seed"}
+    print("median: " + ", ".join(f"{k} {v:.3g}" for k, v in med.items()))
+    if a.out:
+        Path(a.out).write_text(json.dumps({"rows": rows, "median": med, "quick": not a.full}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
