@@ -1,13 +1,13 @@
 """The hull LPs with and without the per-solve budgets of ``ident.numerics.lp.LPModel``: time, limit hits, boxes.
 
-    python benchmarks/bench_lp_budget.py [--problems tx40,h4] [--samples 70000] [--rows 40000] [--refine 1]
+    python benchmarks/bench_lp_budget.py [--problems tx40,h4] [--samples 0] [--rows 40000] [--refine 1]
                                          [--repeats 3] [--threads 1] [--no-unlimited] [--json]
-    python benchmarks/bench_lp_budget.py --quick      (tx40 on 20 000 samples, h4 on 8 000 rows, 2 repeats)
+    python benchmarks/bench_lp_budget.py --quick      (tx40 with refine 0, h4 on 8 000 rows, 2 repeats)
 
 Problems:
 
 * ``tx40``: the certified (Oettli-Prager) equation of the real Staubli TX40 log (``data/tx40``, a 6-joint serial
-  arm) on its first ``--samples`` samples at 5 kHz, with the ``tx40 --error-model derived`` scenario's
+  arm) on its first ``--samples`` samples at 5 kHz (default all 45 000: 2 676 rows x 61 base parameters), with the ``tx40 --error-model derived`` scenario's
   specification and kernel (half-width 200, stride 100), its base parameters and physical prior; the box is
   ``signed_uncertain_hull(..., refine=--refine)`` (the path of ``h4bench identify --urdf --spec``). The
   equation is cached in ``$H4BENCH_CACHE/bench_lp_budget/`` (building it takes minutes).
@@ -57,7 +57,7 @@ def tx40_problem(samples: int) -> dict:
     """The TX40 certified equation on the log's first ``samples`` samples (cached): Wc, D, y, bound, prior."""
     from h4bench.sim.design_cache import cache_root
 
-    path = cache_root() / "bench_lp_budget" / f"tx40_{samples}.npz"
+    path = cache_root() / "bench_lp_budget" / f"tx40_{samples or 'all'}.npz"
     if path.is_file():
         d = np.load(path)
         return {k: d[k] for k in d.files}
@@ -68,7 +68,7 @@ def tx40_problem(samples: int) -> dict:
     log, robot = tx40.load_log(), tx40.robot()
     base = robot.base(200, 0)
     spec = error_spec(DEFAULTS["error_model"])
-    n = min(samples, log.q.shape[0])
+    n = log.q.shape[0] if not samples else min(samples, log.q.shape[0])
     cc = DEFAULTS["certified"]
     eq = certified_equation(robot, base, log.q[:n], log.tau[:n], spec, half_width=cc["half_width"],
                             stride=cc["stride"], position_error=joint_position_error(spec, log.q_motor[:n]))
@@ -184,7 +184,7 @@ def bench(name: str, args) -> dict:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--problems", default="tx40,h4")
-    ap.add_argument("--samples", type=int, default=70_000, help="tx40 log samples (5 kHz)")
+    ap.add_argument("--samples", type=int, default=0, help="tx40 log samples (5 kHz; 0: all 45 000)")
     ap.add_argument("--rows", type=int, default=40_000, help="h4 rows")
     ap.add_argument("--refine", type=int, default=1, help="tx40: refinement rounds of the signed hull")
     ap.add_argument("--repeats", type=int, default=3)
@@ -194,7 +194,7 @@ def main(argv=None) -> None:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.quick:
-        args.samples, args.rows, args.repeats = 20_000, 8_000, 2
+        args.refine, args.rows, args.repeats = 0, 8_000, 2
     print(f"budgets: max({lp.ITERATIONS_FLOOR}, {lp.ITERATIONS_PER_LINE} (m + n)) iterations, "
           f"max({lp.SECONDS_FLOOR:g}, {lp.SECONDS_PER_ENTRY:g} m n) s per HiGHS run; {args.repeats} repeats, "
           f"BLAS threads {args.threads}")

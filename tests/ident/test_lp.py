@@ -237,3 +237,22 @@ def test_budgets_default_from_the_size_and_are_checked():
             LPModel(np.zeros(3), np.ones(3), iteration_limit=bad)
         with pytest.raises(ValueError, match="time_limit"):
             LPModel(np.zeros(3), np.ones(3), time_limit=bad)
+
+
+def test_dual_simplex_after_added_rows_solves_the_same_lps():
+    """``dual_after_rows``: a re-solve after rows were added (same cost) runs the dual simplex for that run only;
+    the optima are linprog's, and the model's own strategy (primal) is back afterwards."""
+    rng = np.random.default_rng(8)
+    A, lo, hi, xl, xu, x_star = _strips(rng, 600, 8)
+    model = LPModel(xl, xu, center=x_star, dual_after_rows=True, simplex_strategy=4)
+    model.add_rows(A[:100], lo[:100], hi[:100])
+    c = rng.normal(size=8)
+    assert model.solve(c).status == "optimal"
+    for k in range(100, 600, 100):
+        model.add_rows(A[k:k + 100], lo[k:k + 100], hi[k:k + 100])
+        sol = model.solve()
+        ref = linprog(c, A_ub=np.vstack([A[:k + 100], -A[:k + 100]]), b_ub=np.concatenate([hi[:k + 100], -lo[:k + 100]]),
+                      bounds=list(zip(xl, xu)), method="highs")
+        assert sol.status == "optimal" and c @ sol.x == pytest.approx(ref.fun, abs=1e-7 * np.abs(c) @ (xu - xl))
+        strategy = model.highs.getOptionValue("simplex_strategy")
+        assert (strategy[1] if isinstance(strategy, tuple) else strategy) == 4
