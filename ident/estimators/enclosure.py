@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from h4bench.ident.estimators.hull import HullResult
+from h4bench.ident.estimators.hull import COUNTERS, HullResult
 
 __all__ = ["INFLATION", "Verdict", "decide_and_enclose"]
 
@@ -77,7 +77,9 @@ def decide_and_enclose(
         if verdict.lower > 1.0 or (crossed and not verdict.solved):
             raise inconsistent(max(verdict.lower, 1.0), verdict.upper)
         factor = max(verdict.upper, 1.0) * INFLATION  # not proven empty: enclose the slightly larger set
-        res = hull(factor, verdict.theta)
+        first, res = res, hull(factor, verdict.theta)
+        for key in COUNTERS:  # the LP work of both hulls is counted
+            res.info[key] = res.info.get(key, 0) + first.info.get(key, 0)
         if res.status != "ok" or np.any(res.lower > res.upper):
             fallback("the hull LPs failed on a set known to be non-empty; the box is the prior")
             res.lower, res.upper = lo.copy(), hi.copy()

@@ -28,7 +28,7 @@ from h4bench.ident.estimators import registry
 from h4bench.ident.estimators.cgsp import cgsp
 from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y
 from h4bench.ident.estimators.enclosure import Verdict, decide_and_enclose
-from h4bench.ident.estimators.hull import chebyshev, interval_hull, scaled_residual_upper, strip_bounds
+from h4bench.ident.estimators.hull import chebyshev, hull_report, interval_hull, scaled_residual_upper, strip_bounds
 
 __all__ = [
     "METHODS",
@@ -180,7 +180,7 @@ def _hull_box(W, y, b, scalar, strips, prior, center, names, info, fallback, che
         ch = check_consistency_by_lp()  # raises when S is proven empty
         if ch is None:  # nothing proven: the (rigorous, larger) scaled residual at the least-squares point
             return Verdict(0.0, scaled_residual_upper(W, y, b, center), center, False)
-        return Verdict(ch.lower, ch.upper, ch.theta, True)
+        return Verdict(ch.lower, ch.upper, ch.theta, not ch.info["lp_fallback"])
 
     res, verdict, factor = decide_and_enclose(
         hull, decide, lambda t: scaled_residual_upper(W, y, b, t),
@@ -194,10 +194,13 @@ def _hull_box(W, y, b, scalar, strips, prior, center, names, info, fallback, che
         failed = sorted({names[j % p] for j in res.info["lp_failures"]}) or "some parameters"
         fallback(f"HiGHS could not solve the LPs of {failed} ({res.info.get('lp_error', 'no optimal basis')}); "
                  "their endpoints are coarser safe bounds or the prior's")
+    report, message = hull_report(res.info, names)
+    if message is not None:
+        fallback(message)
     lower, upper = res.lower, res.upper
     if res.points is not None:  # (p, 2p) the LP solutions (unverified floats): the judging's inner points
         info["points"] = np.array(res.points, dtype=float)
-    info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "lp_failures", "converged")})
+    info.update(report)
     return lower, upper
 
 
@@ -217,16 +220,18 @@ def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consist
     ``nonempty_proven`` (a point of S was verified with rigorous rounding) and ``nearly_inconsistent``
     (S is empty or thinner than the LP tolerance, about 1e-9 relative: neither could be proven; the box
     still encloses S), for the hull ``points`` ((p, 2p) its LP solutions, floats not verified feasible), and per
-    method ``lp_iterations``, ``lp_solves``, ``working_rows``, ``rounds``
-    (hull) or ``sweeps`` (cgsp). With ``check_consistency=False`` a cgsp box carries no emptiness check.
+    method ``lp_iterations``, ``lp_solves``, ``lp_limit_hits``, ``lp_retries``, ``lp_fallbacks``,
+    ``lp_fallback_parameters``, ``working_rows``, ``rounds`` (hull: :func:`~ident.estimators.hull.hull_report`)
+    or ``sweeps`` (cgsp). With ``check_consistency=False`` a cgsp box carries no emptiness check.
     Raises :class:`InconsistentDataError` when S is proven empty; ``ValueError``/``TypeError`` on bad input.
 
     Units: any consistent units give the same box (converted back), to ``1e-6`` of its width plus the
     change of the problem by the rounding of the converted data (``tests/ident/test_units.py`` states and
     checks the tolerance); the LPs are scaled inside (rows by their bound, then columns, powers of two).
-    When HiGHS cannot solve an LP, the affected endpoints are coarser safe bounds or the prior's and a
-    :class:`~ident.numerics.lp.LPFallbackWarning` says which (``info['fallbacks']``); a fallback never makes a
-    box tighter.
+    When HiGHS cannot solve an LP, or an LP stops at its per-solve budget
+    (:class:`~ident.numerics.lp.LPModel`), the affected endpoints are coarser safe bounds or the prior's and a
+    :class:`~ident.numerics.lp.LPFallbackWarning` says which (``info['fallbacks']``,
+    ``info['lp_fallback_parameters']``); a fallback never makes a box tighter.
     """
     t0 = time.perf_counter()
     method = _check_method(method)
@@ -258,6 +263,8 @@ def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consist
             fallback(f"consistency not decided ({exc})")
             return None
         info["consistency_scale"] = (ch.lower, ch.upper)
+        if ch.info["lp_fallback"]:  # chebyshev warned; the bounds are coarser, still rigorous
+            info.setdefault("fallbacks", []).append("the consistency LP stopped at its per-solve budget")
         if ch.lower > 1.0:
             raise _inconsistent(W, y, b, scalar, lo, hi, ch.lower, center)
         info["nonempty_proven"] = ch.upper <= 1.0  # ch.theta satisfies every row exactly

@@ -40,6 +40,7 @@ shift can affect rigour. An LP HiGHS cannot solve keeps its endpoint at a coarse
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,6 +48,7 @@ import numpy as np
 from h4bench.ident.numerics.interval import down, mid_rad, point_matmul, up
 from h4bench.ident.numerics.lp import (
     LPError,
+    LPFallbackWarning,
     LPModel,
     SafeBound,
     SafeBounds,
@@ -57,10 +59,13 @@ from h4bench.ident.numerics.lp import (
 )
 
 __all__ = [
+    "COUNTERS",
     "ChebyshevResult",
+    "HULL_INFO_KEYS",
     "HullResult",
     "SafeBound",
     "chebyshev",
+    "hull_report",
     "interval_hull",
     "power2_scale",
     "safe_lower_bound",
@@ -97,6 +102,10 @@ def _spread_rows(n_rows: int, m: int) -> np.ndarray:
 #: HiGHS options of the hull's models: primal simplex, since after an objective change the previous optimal
 #: basis stays primal feasible (measured: about 15 % fewer iterations than HiGHS's default on the 2p hull LPs)
 PRIMAL_SIMPLEX = {"presolve": "off", "simplex_strategy": 4}
+#: a re-solve after rows were added (same cost) runs the dual simplex (:class:`~ident.numerics.lp.LPModel`)
+DUAL_AFTER_ROWS = False
+#: the counters of :meth:`~ident.numerics.lp.LPModel.counters` in a hull's ``info``
+COUNTERS = ("lp_solves", "lp_iterations", "lp_limit_hits", "lp_retries", "lp_fallbacks")
 
 
 @dataclass
@@ -158,23 +167,31 @@ def _worst(v, candidates, violation_tol, add_rows):
     return idx
 
 
-def _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi):
+def _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi, extra=()):
     """The 2p safe bounds (LP j < p: lower of theta_j; LP p + j: upper) over the prior, then once more over the
     box they give (it encloses the set, so the bound stays valid and the residual costs only that box).
-    All 2p at once (:class:`~ident.numerics.lp.SafeBounds`: the rows of every LP's duals gathered once)."""
+
+    duals : 2p ``(rows, y)``, LP j's dual guess; extra : further ``(j, rows, y)`` guesses of LP j (e.g. the
+    duals where a solve stopped at its budget, or of an earlier solve on fewer rows): each guess gives a valid
+    bound (Neumaier & Shcherbina), and each endpoint is the best of its LP's guesses and the prior.
+    All at once (:class:`~ident.numerics.lp.SafeBounds`: the rows of every guess gathered once)."""
     p = prior_lo.size
-    rows = np.unique(np.concatenate([r for r, _ in duals]))
-    Y = np.zeros((rows.size, 2 * p))
-    for j, (r, yd) in enumerate(duals):
-        Y[np.searchsorted(rows, r), j] = yd
-    bounds = SafeBounds(W[rows], bl[rows], bu[rows], costs, Y, theta0)
+    guesses = [(j, r, yd) for j, (r, yd) in enumerate(duals)] + list(extra)
+    lps = np.array([j for j, _, _ in guesses], dtype=np.int64)
+    rows = np.unique(np.concatenate([r for _, r, _ in guesses]))
+    Y = np.zeros((rows.size, lps.size))
+    for k, (_, r, yd) in enumerate(guesses):
+        Y[np.searchsorted(rows, r), k] = yd
+    bounds = SafeBounds(W[rows], bl[rows], bu[rows], costs[lps], Y, theta0)
     lower, upper = prior_lo.copy(), prior_hi.copy()
     for refine in (False, True):
         if refine and np.any(lower > upper):
             break  # the set is proven empty: no box to refine over
         mu = bounds.over(lower.copy(), upper.copy()) if refine else bounds.over(prior_lo, prior_hi)
-        lower = np.maximum(lower, mu[:p])
-        upper = np.minimum(upper, -mu[p:])
+        best = np.full(2 * p, -np.inf)
+        np.maximum.at(best, lps, mu)
+        lower = np.maximum(lower, best[:p])
+        upper = np.minimum(upper, -best[p:])
     return lower, upper
 
 
@@ -222,19 +239,21 @@ class _WorkingSet:
 
     def solve(self, cost, max_rounds, violation_tol, add_rows):
         """Solve ``min cost^T theta`` on the working set, adding the worst violated pool rows and re-solving until
-        none is violated. Returns ``(solution, rows)`` with ``rows`` the model's rows at that solve (the duals'
-        rows); ``(None, rows)`` when HiGHS does not solve the LP (:class:`LPError` when it rejects rows)."""
-        sol, rows = None, self.idx
+        none is violated. Returns ``(solution, rows, earlier)`` with ``rows`` the model's rows at that solve (the
+        duals' rows); solution None when HiGHS does not solve the LP, status 'limit' when it stopped at the
+        per-solve budget (:class:`LPError` when HiGHS rejects rows); ``earlier`` the ``(rows, duals)`` of this
+        call's last optimal solve before a re-solve (a valid dual guess of fewer rows), or None."""
+        sol, rows, earlier = None, self.idx, None
         for _ in range(max_rounds):
             try:
                 sol, rows = self.model.solve(cost), self.idx
             except LPError:
-                return None, rows
-            if sol.status == "infeasible":
-                return sol, rows
+                return None, rows, earlier
+            if sol.status != "optimal":
+                return sol, rows, earlier
             cnt, complete = self._prefix(sol.z[:, None])
             if cnt == 0:
-                return sol, rows
+                return sol, rows, earlier
             v = self.nW[:cnt] @ sol.z  # in place: v = (|W z - m0| - half) / unit, the scaled violation
             v -= self.nm0[:cnt]
             np.abs(v, out=v)
@@ -243,9 +262,10 @@ class _WorkingSet:
             v[self.nmask[:cnt]] = -np.inf  # rows already in the model
             new = _worst(v, self.near[:cnt], violation_tol, add_rows if complete else 3 * add_rows)
             if new.size == 0:
-                return sol, rows
+                return sol, rows, earlier
+            earlier = (rows, sol.duals) if sol.dual_valid else earlier
             self.add(new)
-        return sol, rows
+        return sol, rows, earlier
 
     def full_check(self, dx_cols, violation_tol, add_rows) -> list:
         """Check the shifted solutions ``dx_cols`` (p, k) against all N rows (a prefix of the pool when that is
@@ -268,6 +288,42 @@ class _WorkingSet:
         return new
 
 
+#: the keys of a hull's ``info`` that the estimators built on it copy into their Box's ``info``
+HULL_INFO_KEYS = COUNTERS + ("working_rows", "rounds", "lp_failures", "converged")
+
+
+def hull_report(info: dict, names) -> tuple[dict, str | None]:
+    """What an estimator reports of a hull's ``info`` (:func:`interval_hull`): the :data:`HULL_INFO_KEYS` and
+    ``lp_fallback_parameters`` (the names, of ``names`` (p,), of the parameters with an endpoint whose LP stopped
+    at its per-solve budget: that endpoint is a coarser safe bound), and the warning to raise about them (None
+    when no LP fell back)."""
+    p = len(names)
+    out = {k: info[k] for k in HULL_INFO_KEYS}
+    ends = info.get("lp_fallback_endpoints", [])
+    out["lp_fallback_parameters"] = sorted({names[j % p] for j in ends})
+    if not ends:
+        return out, None
+    which = ", ".join(f"{'lower' if j < p else 'upper'} {names[j % p]}" for j in ends)
+    return out, (f"the LPs of {len(ends)} endpoint(s) stopped at their per-solve budget after a cold retry "
+                 f"({which}); those endpoints are coarser safe bounds (from the duals at the limit or of an "
+                 "earlier solve) or the prior's")
+
+
+def _fallback_guesses(j, sol, rows, earlier) -> list:
+    """The dual guesses ``(j, rows, y)`` of LP j whose solve did not finish: the duals HiGHS held where it
+    stopped (``sol`` of status 'limit', when valid) and those of the last optimal solve before it on fewer rows
+    (``earlier``). Each gives a valid, coarser safe bound (Neumaier & Shcherbina); none: the prior's."""
+    out = []
+    if sol is not None and sol.dual_valid:
+        nz = sol.duals != 0.0
+        out.append((j, rows[nz], sol.duals[nz]))
+    if earlier is not None:
+        r, yd = earlier
+        nz = yd != 0.0
+        out.append((j, r[nz], yd[nz]))
+    return out
+
+
 def interval_hull(
     W: np.ndarray,
     bl: np.ndarray,
@@ -284,6 +340,7 @@ def interval_hull(
     violation_tol: float = 1e-10,
     lp_tol: float = 1e-9,
     max_rounds: int = 100,
+    lp_budget: dict | None = None,
 ) -> HullResult:
     """Rigorous outer enclosure (tight to the LP tolerances) of the hull of ``{x in Q : bl <= W x <= bu}``.
 
@@ -310,9 +367,18 @@ def interval_hull(
     Inputs are assumed validated (finite, ``bl <= bu``, ``prior_lo <= prior_hi``). Returns a
     :class:`HullResult`; ``status == 'infeasible'`` when HiGHS found a working set infeasible (the caller
     proves emptiness with :func:`chebyshev`). Every endpoint is a safe dual bound (module docstring),
-    evaluated around ``center`` and then once more over the box just found, clipped to the prior. An LP that
-    HiGHS cannot solve keeps its endpoint at the prior and is listed in ``info['lp_failures']`` (a model it
-    rejects also sets ``info['lp_error']``, the message).
+    evaluated around ``center`` and then once more over the box just found, clipped to the prior.
+
+    Budgets and fallbacks: every solve runs under the per-solve budgets of
+    :class:`~ident.numerics.lp.LPModel` (``lp_budget``: its ``iteration_limit``, ``time_limit``; default from
+    the model's size). An LP whose solve stops at the budget (after the cold retry) is not solved again; its
+    endpoint is the best safe bound of the duals HiGHS held at the limit, those of its last optimal solve on
+    fewer rows (an earlier re-solve or round) and the prior: never narrower than the exact hull, and listed in
+    ``info['lp_fallback_endpoints']`` (LP j < p: the lower endpoint of parameter j; p + j: its upper). An LP
+    that HiGHS cannot solve at all (:class:`LPError`) keeps its endpoint the same way and is listed in
+    ``info['lp_failures']`` (a model it rejects also sets ``info['lp_error']``, the message). ``info`` also
+    carries the model's counters ``lp_solves``, ``lp_iterations``, ``lp_limit_hits``, ``lp_retries``,
+    ``lp_fallbacks`` (:meth:`~ident.numerics.lp.LPModel.counters`).
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
@@ -338,21 +404,25 @@ def interval_hull(
     costs[p + np.arange(p), np.arange(p)] = -1.0  # LP p + i: min -theta_i = -max theta_i
     x_sol = np.repeat(theta0[:, None], n_lp, axis=1)
     dx_sol = np.zeros((p, n_lp))
-    duals: list = [(first[:0], np.zeros(0))] * n_lp
+    duals: list = [(first[:0], np.zeros(0))] * n_lp  # LP j's last optimal duals (valid for LP j in any round)
+    extra: list = []  # further dual guesses (j, rows, y) of LPs that fell back
     failures: list[int] = []
+    fell_back: list[int] = []
     lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
     todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
-        model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=d, tolerance=lp_tol, **PRIMAL_SIMPLEX)
+        model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=d, tolerance=lp_tol,
+                        dual_after_rows=DUAL_AFTER_ROWS, **PRIMAL_SIMPLEX, **(lp_budget or {}))
         ws = _WorkingSet(W, m0, half, unit, size, d, near, rho[near], model)
         ws.add(first)
         while todo and rounds < max_rounds and not infeasible:
             rounds += 1
+            solved = []
             for j in todo:
-                sol, rows = ws.solve(costs[j], max_rounds, violation_tol, add_rows)
-                if sol is None:
-                    failures.append(int(j))  # no usable duals: y = 0 keeps the endpoint at the prior
-                    duals[j] = (first[:0], np.zeros(0))
+                sol, rows, earlier = ws.solve(costs[j], max_rounds, violation_tol, add_rows)
+                if sol is None or sol.status == "limit":  # not solved: coarser safe guesses (module docstring)
+                    (failures if sol is None else fell_back).append(int(j))
+                    extra.extend(_fallback_guesses(j, sol, rows, earlier))
                     continue
                 if sol.status == "infeasible":
                     infeasible = True
@@ -360,26 +430,28 @@ def interval_hull(
                 dx_sol[:, j], x_sol[:, j] = sol.z, sol.x
                 nz = sol.duals != 0.0  # duals of the original rows for the original cost +-e_i (any y is valid)
                 duals[j] = (rows[nz], sol.duals[nz])
-            if not infeasible:  # full check of the solutions just computed against all N rows
-                check_lps = np.array(todo)
+                solved.append(j)
+            todo = []
+            if not infeasible and solved:  # full check of the solutions just computed against all N rows
+                check_lps = np.array(solved)
                 new = ws.full_check(dx_sol[:, check_lps], violation_tol, add_rows)
                 todo = [int(j) for j, rows in zip(check_lps, new) if rows.size]
     except LPError as exc:  # a model HiGHS rejects: the endpoints solved so far keep their (valid) duals
         lp_error = str(exc)
         infeasible = False
-        failures.extend(j for j in range(n_lp) if duals[j][0].size == 0 and j not in failures)
+        failures.extend(j for j in range(n_lp) if duals[j][0].size == 0 and j not in failures + fell_back)
 
     if infeasible:
         lower, upper = prior_lo.copy(), prior_hi.copy()
     else:
-        lower, upper = _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi)
+        lower, upper = _safe_endpoints(W, bl, bu, costs, duals, theta0, prior_lo, prior_hi, extra)
     info = {
-        "lp_iterations": 0 if model is None else model.iterations,
-        "lp_solves": 0 if model is None else model.solves,
+        **(model.counters() if model is not None else dict.fromkeys(COUNTERS, 0)),
         "working_rows": 0 if ws is None else int(ws.idx.size),
         "rounds": rounds,
         "lp_failures": sorted(set(failures)),
-        "converged": not todo and lp_error is None,
+        "lp_fallback_endpoints": sorted(set(fell_back)),
+        "converged": not todo and lp_error is None and not failures and not fell_back,
         "seconds": time.perf_counter() - t0,
     }
     if lp_error is not None:
@@ -470,7 +542,11 @@ def chebyshev(
     scaled as in :func:`interval_hull` (rows by ``1 / w``, then columns, powers of two); the safe bound is
     evaluated on the exact data around ``center``. The first working set is the rows of largest scaled
     residual at ``center`` plus spread rows. Raises :class:`~ident.numerics.lp.LPError` when HiGHS cannot solve
-    the LP or rejects the model (no bound is then known beyond the residual at ``center``).
+    the LP or rejects the model (no bound is then known beyond the residual at ``center``). An LP that stops
+    at its per-solve budget (:class:`~ident.numerics.lp.LPModel`) gives coarser safe bounds instead: ``lower``
+    the best safe bound of the duals HiGHS held there and of the last optimal solve's (fewer rows), ``upper``
+    the residual at the last optimal point (or ``center``); ``info['lp_fallback']`` is then True and an
+    :class:`~ident.LPFallbackWarning` is raised.
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
@@ -500,11 +576,17 @@ def chebyshev(
     order = [ws_idx]
     add_model_rows(ws_idx)
     rounds = 0
+    dtheta = np.zeros(p)
+    guesses = []  # dual guesses of the model's first rows: the last optimal solve's (fewer rows are valid too)
     while True:
         rounds += 1
-        sol = model.solve(cost if rounds == 1 else None)  # LPError unless optimal or infeasible
-        if sol.status != "optimal":
+        sol = model.solve(cost if rounds == 1 else None)  # LPError unless optimal, infeasible or 'limit'
+        if sol.status == "infeasible":
             raise LPError("HiGHS failed on the Chebyshev LP: infeasible (it always has a solution)")
+        if sol.dual_valid:
+            guesses = [sol.duals] if sol.status == "optimal" else guesses + [sol.duals]
+        if sol.status == "limit":  # stopped at the per-solve budget: the last optimal point and the guesses
+            break
         dtheta, s = sol.z[:p], sol.z[p]
         worst = _scaled_residuals(W, e0, w, dtheta)
         worst[ws_mask] = -np.inf
@@ -520,16 +602,22 @@ def chebyshev(
     ws_all = np.concatenate(order)
     # HiGHS keeps the rows in insertion order: each block added the >= rows of the block, then its <= rows
     A, lo, hi = (np.concatenate(part) for part in zip(*(_chebyshev_rows(W, y, w, blk) for blk in order)))
-    rd = sol.duals  # the duals of the unscaled rows
-    nz = rd != 0.0
-    lower = shifted_safe_bound(A[nz], lo[nz], hi[nz], xl, xu, cost, rd[nz], x0)
+    lower = 0.0  # s >= 0 (no guess: nothing proven beyond it)
+    for rd in guesses:  # the duals of the unscaled rows (of the first rd.size rows when from an earlier solve)
+        nz = np.flatnonzero(rd != 0.0)
+        lower = max(lower, shifted_safe_bound(A[nz], lo[nz], hi[nz], xl, xu, cost, rd[nz], x0))
     theta = np.clip(theta0 + dtheta, prior_lo, prior_hi)
     upper = scaled_residual_upper(W, y, w, theta)
+    fell_back = sol.status == "limit"
+    if fell_back:
+        warnings.warn(f"chebyshev: the LP stopped at its per-solve budget (round {rounds}); the bounds of the "
+                      f"scale are coarser safe ones: [{lower:.6g}, {upper:.6g}]", LPFallbackWarning, stacklevel=2)
     info = {
-        "lp_iterations": model.iterations,
+        **model.counters(),
         "working_rows": int(ws_all.size),
         "rounds": rounds,
-        "converged": rounds < max_rounds,
+        "converged": rounds < max_rounds and not fell_back,
+        "lp_fallback": fell_back,
         "seconds": time.perf_counter() - t0,
     }
-    return ChebyshevResult(theta=theta, upper=upper, lower=max(lower, 0.0), info=info)
+    return ChebyshevResult(theta=theta, upper=upper, lower=lower, info=info)

@@ -110,7 +110,8 @@ class OnlineHull:
         self._lower = self._lo.copy()
         self._upper = self._hi.copy()
         self._duals: list[np.ndarray | None] = [None] * (2 * p)
-        self.stats = {"updates": 0, "resolved_endpoints": 0, "lp_solves": 0, "lp_iterations": 0}
+        self.stats = {"updates": 0, "resolved_endpoints": 0, "lp_solves": 0, "lp_iterations": 0, "lp_limit_hits": 0,
+                      "lp_retries": 0, "lp_fallbacks": 0}
 
     # ------------------------------------------------------------------------------------------ state
     @property
@@ -252,7 +253,7 @@ class OnlineHull:
                 if status == "infeasible":
                     fallback = self._infeasible()
                     break
-                if status == "failed":
+                if status in ("failed", "limit"):  # not solved again in this update: its bound stays valid
                     failed.add(j)
             if fallback is not None:
                 break
@@ -300,7 +301,7 @@ class OnlineHull:
 
     def _add_and_solve(self, j: int, rows: np.ndarray) -> str:
         """Add rows to model j and re-solve; a model HiGHS rejects or cannot solve is rebuilt once around the
-        current box's midpoint. Returns 'ok', 'infeasible' or 'failed'."""
+        current box's midpoint. Returns 'ok', 'infeasible', 'failed' or 'limit' (:meth:`_solve`; not rebuilt)."""
         if self._models[j] is not None:
             # the box has shrunk to 1e-5 of this model's distance to it: re-centre the model (its
             # row bounds would otherwise be huge in units of the strips, beyond the LP's precision)
@@ -323,19 +324,24 @@ class OnlineHull:
         return status
 
     def _solve(self, j: int) -> str:
+        """Solve model j: 'ok', 'infeasible', 'failed' (HiGHS could not: the endpoint keeps its bound) or 'limit'
+        (stopped at the per-solve budget: the duals HiGHS held give the endpoint a coarser safe bound)."""
         h = self._model(j)
         self._duals[j] = None  # until this solve gives duals for the model's current rows
-        solves, iterations = h.solves, h.iterations
+        before = h.counters()
         try:
             sol = h.solve()
         except LPError:
             sol = None  # the previous (valid) bound of this endpoint stays
-        self.stats["lp_solves"] += h.solves - solves
-        self.stats["lp_iterations"] += h.iterations - iterations
+        for key, value in h.counters().items():
+            self.stats[key] += value - before[key]
         if sol is None:
             return "failed"
         if sol.status == "infeasible":
             return "infeasible"
+        if sol.status == "limit":
+            self._duals[j] = sol.duals if sol.dual_valid else None  # any duals give a valid bound
+            return "limit"
         self._x[:, j] = np.clip(sol.x, self._lo, self._hi)
         self._duals[j] = sol.duals  # of the unscaled rows for the cost +-e_i
         return "ok"

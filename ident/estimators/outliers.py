@@ -69,7 +69,8 @@ from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y
 from h4bench.ident.estimators.estimate import estimate, min_consistent_bound
 from h4bench.ident.estimators.hull import strip_bounds
 from h4bench.ident.numerics.interval import point_matvec, up
-from h4bench.ident.numerics.lp import LPError, LPModel, check, column_scale, power2_scale, safe_lower_bound
+from h4bench.ident.numerics.lp import (LPError, LPModel, arm_time_limit, check, column_scale, power2_scale,
+                                       safe_lower_bound)
 
 __all__ = ["OutlierBudgetError", "OutlierRows", "detect_outliers", "relaxed_hull"]
 
@@ -341,7 +342,6 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
     if highs_milp:
         mip_model = model.highs(integer=True)
         mip = mip_model.highs  # HiGHS's MILP statuses (a time limit with an incumbent) are read directly
-        check(mip.setOptionValue("time_limit", float(milp_time_limit)), "option time_limit")
     lp = model.highs(integer=False)
     ncol = p + n + 1
     lower, upper = lo.copy(), hi.copy()
@@ -356,6 +356,7 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
         hint: set = set()
         if mip is not None:  # HiGHS's own MILP solver: incumbent, hint and an independent value
             mip_model.set_cost(cost, normalize=False)
+            arm_time_limit(mip, milp_time_limit)  # each endpoint's MILP its own time (HiGHS's counts all runs)
             run_error = mip.run() == highspy.HighsStatus.kError  # no incumbent then: the search finds its own
             ms = mip.getModelStatus()
             sol = mip.getSolution()
@@ -391,7 +392,10 @@ def _exact_endpoints(W, bl, bu, lo, hi, budget, *, max_nodes, time_limit, highs_
             except LPError:
                 s = None
             if s is None or s.status != "optimal" or not s.dual_valid:
-                closed = min(closed, lbp)  # no usable duals: the parent's bound stays valid for this region
+                # not solved: the parent's bound stays valid for this region, and so does the safe bound of the
+                # duals HiGHS held when it stopped at its per-solve budget (any duals are a valid guess)
+                limit = s is not None and s.status == "limit" and s.dual_valid
+                closed = min(closed, max(lbp, model.safe_bound(lp_cost, s.duals, xl, xu)) if limit else lbp)
                 continue
             lb = max(lbp, model.safe_bound(lp_cost, s.duals, xl, xu))
             if lb >= cut - tau:

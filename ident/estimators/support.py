@@ -13,8 +13,9 @@ that contains it (the prior, or a hull of S). :class:`SupportLP` answers ``min c
   Program. 99, 2004; :class:`ident.numerics.lp.SafeBound`) of the working-set LP, with its row duals, evaluated
   on the original data around the centre and over ``B``. A working set has fewer rows than S, so its LP's
   minimum is at most the minimum over S: the bound is rigorous whatever the tolerances and however many rows
-  are still missing; the tolerances only decide its tightness. An LP HiGHS cannot solve gives the interval
-  bound of ``c^T theta`` over ``B``.
+  are still missing; the tolerances only decide its tightness. An LP HiGHS cannot solve, or that stops at its
+  per-solve budget (:class:`ident.numerics.lp.LPModel`), gives the best of the interval bound of ``c^T theta``
+  over ``B`` and the safe bounds of the duals at hand (HiGHS's at the limit, an earlier solve's on fewer rows).
 
 The row bounds ``y -+ b`` are rounded outward (:func:`ident.estimators.hull.strip_bounds`); HiGHS sees the model
 shifted to the centre and scaled by powers of two (rows by their bound, then columns), as in the hull.
@@ -126,7 +127,7 @@ class SupportLP:
         if not np.any(c * self.model.d) or self.infeasible:
             self.seconds += time.perf_counter() - t0
             return fallback, None
-        sol, rows = None, self.idx
+        sol, rows, guesses = None, self.idx, []  # guesses: (rows, duals) of the optimal solves on fewer rows
         try:
             for r in range(self.max_rounds):
                 sol, rows = self.model.solve(c if r == 0 else None), self.idx
@@ -135,21 +136,31 @@ class SupportLP:
                     self.infeasible = True
                     self.seconds += time.perf_counter() - t0
                     return fallback, None
+                if sol.status == "limit":  # stopped at the per-solve budget: a coarser safe bound
+                    break
                 new = self._violated(sol.z)
                 if new.size == 0:
                     break
+                guesses = [(rows, sol.duals)] if sol.dual_valid else guesses
                 self._add(new)
         except LPError:
             sol = None
-        if sol is None or sol.status != "optimal" or not sol.dual_valid:
+        ok = sol is not None and sol.status == "optimal" and sol.dual_valid
+        if ok:
+            guesses = [(rows, sol.duals)]  # the optimum's duals: the tight guess
+        elif sol is not None and sol.dual_valid:
+            guesses.append((rows, sol.duals))  # a limit's duals beside the earlier solve's: the better one counts
+        if not ok:
             self.failures += 1
-            self.seconds += time.perf_counter() - t0
-            return fallback, None
-        nz = sol.duals != 0.0
-        r = rows[nz]
-        mu = SafeBound(self.W[r], self.bl[r], self.bu[r], c, sol.duals[nz], self.center).over(self.lower, self.upper)
+        mu = max([fallback] + [self._safe(c, r, yd) for r, yd in guesses])
         self.seconds += time.perf_counter() - t0
-        return max(mu, fallback), sol.x
+        return mu, sol.x if ok else None
+
+    def _safe(self, c, rows, duals) -> float:
+        """The safe lower bound of ``min c^T theta`` for the dual guess ``duals`` of the model's rows ``rows``."""
+        nz = duals != 0.0
+        r = rows[nz]
+        return SafeBound(self.W[r], self.bl[r], self.bu[r], c, duals[nz], self.center).over(self.lower, self.upper)
 
     def maximize(self, c) -> tuple[float, np.ndarray | None]:
         """A rigorous upper bound of ``max c^T theta`` over S and the LP's maximiser (see :meth:`minimize`)."""

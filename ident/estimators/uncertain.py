@@ -38,7 +38,7 @@ from h4bench.ident.errors import InconsistentDataError
 from h4bench.ident.estimators.enclosure import Verdict, decide_and_enclose
 from h4bench.ident.estimators.checks import check_bound, check_finite, check_prior, real_array
 from h4bench.ident.estimators.estimate import least_squares_center
-from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, interval_hull, strip_bounds
+from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, hull_report, interval_hull, strip_bounds
 from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
 from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
 
@@ -74,7 +74,8 @@ def _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol=1e-9, center=None):
     Returns (s_lower (safe dual bound), s_upper (verified at the returned theta), theta, solved). ``S`` is empty iff
     ``s* > 1``. All rows at once (HiGHS, shifted to ``center`` and scaled rows first by ``1 / b``, then
     columns, powers of two); the bound is rigorous for the exact float data. If HiGHS cannot solve the LP,
-    ``s_lower = 0`` (nothing proven), ``s_upper`` is the verified value at ``center`` and ``solved`` is False.
+    ``s_lower = 0`` (nothing proven), ``s_upper`` is the verified value at ``center`` and ``solved`` is False; if
+    it stops at its per-solve budget, the same but ``s_lower`` the safe bound of the duals HiGHS held there.
     """
     m, p = W_lo.shape
     theta0 = 0.5 * lo + 0.5 * hi if center is None else np.clip(center, lo, hi)
@@ -93,16 +94,19 @@ def _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol=1e-9, center=None):
         model = LPModel(xl, xu, center=x0, col_scale=d, tolerance=lp_tol, **PRIMAL_SIMPLEX)
         model.add_shifted_rows(A, bl - a0, bu - a0, np.tile(b, 2))
         sol = model.solve(cost)
-        if sol.status != "optimal":
+        if sol.status == "infeasible":
             raise LPError("HiGHS failed on the Oettli-Prager scale LP: infeasible (it always has a solution)")
     except LPError as exc:
         warnings.warn(f"uncertain_hull: {exc}; consistency not decided by the LP", LPFallbackWarning, stacklevel=3)
         return 0.0, s0, theta0, False
-    x = sol.x
-    yd = sol.duals  # of the unscaled rows
+    yd = sol.duals  # of the unscaled rows (at a limit: those HiGHS held, still a valid guess)
     nz = yd != 0.0
-    s_lo = shifted_safe_bound(A[nz], bl[nz], bu[nz], xl, xu, cost, yd[nz], x0)
-    theta = np.clip(x[:p], lo, hi)
+    s_lo = shifted_safe_bound(A[nz], bl[nz], bu[nz], xl, xu, cost, yd[nz], x0) if sol.dual_valid else 0.0
+    if sol.status == "limit":
+        warnings.warn(f"uncertain_hull: the Oettli-Prager scale LP stopped at its per-solve budget; its safe lower "
+                      f"bound {max(s_lo, 0.0):.6g} is coarser", LPFallbackWarning, stacklevel=3)
+        return max(s_lo, 0.0), s0, theta0, False
+    theta = np.clip(sol.x[:p], lo, hi)
     return max(s_lo, 0.0), _op_upper(W_lo, W_hi, y, b, theta), theta, True
 
 
@@ -121,8 +125,10 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     (m,) > 0; prior : :class:`~ident.Box` or (lower, upper) with ``lower >= 0`` (the polytope form of the
     module docstring needs theta >= 0). The exact hull of S by 2p LPs on the 2m stacked rows, rigorous
     endpoints. Returns a Box with ``info``: ``method='interval'``, ``rows``, ``nonempty_proven``,
-    ``seconds``, the hull's LP statistics, ``bound_inflated_by`` when HiGHS found S empty within its tolerance
-    without a proof (then the box encloses a slightly larger set). Raises :class:`~ident.InconsistentDataError`
+    ``seconds``, the hull's LP statistics and budget counters (:func:`~ident.estimators.hull.hull_report`:
+    ``lp_limit_hits``, ``lp_retries``, ``lp_fallbacks``, ``lp_fallback_parameters``; a fallback also raises an
+    :class:`~ident.LPFallbackWarning` naming the endpoints), ``bound_inflated_by`` when HiGHS found S empty
+    within its tolerance without a proof (then the box encloses a slightly larger set). Raises :class:`~ident.InconsistentDataError`
     when S is proven empty (``min_bound`` the smallest consistent scalar bound, rounded up; ``scale_lower``
     a proven lower bound of the factor the given bounds need); ``ValueError``/``TypeError`` on bad input.
     """
@@ -185,8 +191,10 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
         warnings.warn(f"uncertain_hull: HiGHS could not solve {len(res.info['lp_failures'])} of the hull LPs "
                       f"({res.info.get('lp_error', 'no optimal basis')}); their endpoints are coarser safe bounds "
                       "or the prior's", LPFallbackWarning, stacklevel=2)
-    info["lp_failures"] = res.info["lp_failures"]
-    info.update({k: res.info[k] for k in ("lp_iterations", "lp_solves", "working_rows", "rounds", "converged")})
+    report, message = hull_report(res.info, names)
+    if message is not None:
+        warnings.warn(f"uncertain_hull: {message}", LPFallbackWarning, stacklevel=2)
+    info.update(report)
     lower, upper = np.clip(res.lower, lo, hi), np.clip(res.upper, lo, hi)
     info["seconds"] = time.perf_counter() - t0
     return Box(lower=lower, upper=upper, names=names, info=info)

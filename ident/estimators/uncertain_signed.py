@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from h4bench.ident.box import Box
+from h4bench.ident.estimators.hull import COUNTERS
 from h4bench.ident.estimators.uncertain import uncertain_hull
 from h4bench.ident.numerics.interval import down, point_matvec, up
 
@@ -29,7 +30,10 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
     products are rounded up, so the set can only grow. Up to ``refine`` times, the box found becomes the prior
     (the truth lies in it), which shortens the chords; it stops earlier when the geometric mean of the widths
     shrank by less than ``rtol`` (relative) in the last round. Returns an :class:`ident.Box` with
-    ``info['refinements']`` (the rounds done).
+    ``info['refinements']`` (the rounds done), the last round's hull statistics, and the LP counters
+    (``lp_solves``, ``lp_iterations``, ``lp_limit_hits``, ``lp_retries``, ``lp_fallbacks``) summed and
+    ``lp_fallback_parameters`` gathered over all rounds (an endpoint that fell back in an earlier round is still
+    a valid bound: each round's box encloses the set, and the next round's prior is that box).
     """
     Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
     lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
@@ -54,7 +58,13 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
         hi_f = np.nextafter(lo1 + sub.upper, np.inf)
         new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))
         new_hi = np.minimum(hi, np.where(flip, -lo_f, hi_f))
-        box = Box(new_lo, new_hi, names=names, info={**sub.info, "refinements": it})
+        info = {**sub.info, "refinements": it}
+        if box is not None:  # the LP work and the fallbacks of every round are counted
+            for key in COUNTERS:
+                info[key] += box.info[key]
+            info["lp_fallback_parameters"] = sorted(set(info["lp_fallback_parameters"])
+                                                    | set(box.info["lp_fallback_parameters"]))
+        box = Box(new_lo, new_hi, names=names, info=info)
         w_old, w_new = hi - lo, new_hi - new_lo
         pos = (w_old > 0) & (w_new > 0)
         shrink = 1.0 - float(np.exp(np.mean(np.log(w_new[pos] / w_old[pos])))) if np.any(pos) else 0.0

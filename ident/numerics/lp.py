@@ -21,6 +21,16 @@
   :func:`safe_lower_bound`, :func:`safe_upper_bound`, :func:`shifted_safe_bound`; :class:`SafeBounds` for many
   LPs over the same rows at once) turns any duals into a rigorous bound over a box (Neumaier & Shcherbina,
   Math. Program. 99, 2004), so neither the scaling nor the LP tolerances can affect rigour.
+* **A budget per solve, never stuck.** Every HiGHS run of :meth:`LPModel.solve` has a simplex iteration limit
+  and a wall-time limit of its own (:meth:`LPModel.budgets`: defaults from the model's size, overridable). A run
+  stopped by a limit (or ending in any other non-final status) is retried once from a cold start with the dual
+  simplex, under the same budget; if that one stops too, the solve returns the status ``'limit'`` with the
+  duals HiGHS holds (those of the dual simplex, dual feasible once in its phase 2; any duals give a valid safe
+  bound), and the caller falls back to a coarser safe bound. HiGHS's ``time_limit`` counts the run time of the
+  whole ``Highs`` object (once reached, every later run stops at once: measured with highspy 1.16), so it is
+  re-armed before each run to the object's run time so far plus the budget (:func:`arm_time_limit`). The model
+  counts ``solves`` (HiGHS runs), ``iterations``, ``limit_hits`` (runs stopped by a limit), ``retries`` (cold
+  re-runs) and ``fallbacks`` (solves that returned ``'limit'``).
 """
 
 from __future__ import annotations
@@ -46,6 +56,7 @@ __all__ = [
     "SafeBound",
     "SafeBounds",
     "add_dense_rows",
+    "arm_time_limit",
     "check",
     "column_scale",
     "new_highs",
@@ -67,6 +78,16 @@ def check(status, what: str) -> None:
     """Raise :class:`LPError` if a HiGHS call returned ``kError`` (warnings are accepted)."""
     if status == _ERROR:
         raise LPError(f"HiGHS rejected {what} (status {status})")
+
+
+def arm_time_limit(h: highspy.Highs, seconds: float) -> None:
+    """Let the next ``h.run()`` take at most ``seconds`` of wall time (inf: no limit).
+
+    HiGHS compares its ``time_limit`` option with the run time of the whole ``Highs`` object, summed over its
+    runs (``getRunTime``), so a limit set once stops every run after the first ones that used it up; this sets
+    it to the run time so far plus ``seconds``.
+    """
+    check(h.setOptionValue("time_limit", float(h.getRunTime()) + float(seconds)), f"option time_limit (+{seconds} s)")
 
 
 def _flush_c_stdout() -> None:
@@ -146,6 +167,22 @@ def add_dense_rows(h: highspy.Highs, A: np.ndarray, lo: np.ndarray, hi: np.ndarr
 # ------------------------------------------------------------------------------------------ the LP core
 _OPTIMAL = highspy.HighsModelStatus.kOptimal
 _INFEASIBLE = highspy.HighsModelStatus.kInfeasible
+_LIMITS = (highspy.HighsModelStatus.kIterationLimit, highspy.HighsModelStatus.kTimeLimit)
+_DUAL_SIMPLEX = 1  # HiGHS's simplex_strategy of the serial dual simplex (its default)
+_MAX_ITERATIONS = 2**31 - 1  # HiGHS's largest simplex_iteration_limit (its default: no limit)
+
+#: Defaults of the per-solve budgets (:meth:`LPModel.budgets`), for each HiGHS run of a solve: at least
+#: ``ITERATIONS_FLOOR`` simplex iterations, ``ITERATIONS_PER_LINE`` per row and column; at least
+#: ``SECONDS_FLOOR`` seconds, ``SECONDS_PER_ENTRY`` per entry of the ``m x n`` matrix. Measured on the signed
+#: Oettli-Prager hull of a 6-joint arm's certified equation (a 28 s synthetic TX40 log as in
+#: tests/ident/test_serial_certified.py: 4188 rows x 61 base parameters, 3 refinements, working sets up to
+#: 2 605 rows; 2 cores under a load average of 10-28): warm runs at most 767 iterations and 1.1 s, cold
+#: dual-simplex runs (each solve's first run stopped on purpose) median 259 and at most 988 iterations, at most
+#: 1.2 s. The defaults are 20x those; a stuck warm start (primal simplex) ran past 80 000 iterations.
+ITERATIONS_FLOOR = 20_000
+ITERATIONS_PER_LINE = 10
+SECONDS_FLOOR = 20.0
+SECONDS_PER_ENTRY = 4e-6
 _CHUNK = 8192  # rows per block when scanning a matrix: temporaries stay small
 
 
@@ -181,11 +218,13 @@ def column_scale(A: np.ndarray, row_scale: np.ndarray | None = None) -> np.ndarr
 
 @dataclass
 class LPSolution:
-    """One solve of :class:`LPModel`: ``status`` 'optimal' or 'infeasible'; on 'optimal', ``x`` (n,) the
-    solution in the model's original coordinates (float, unverified), ``z`` (n,) the same as a shift from the
-    centre, ``duals`` (m,) the row duals of the ORIGINAL (unscaled) rows for the ORIGINAL cost (zeros when
-    HiGHS gives none, then ``dual_valid`` is False), usable as the dual guess of :class:`SafeBound`;
-    ``iterations`` the simplex iterations of this solve."""
+    """One solve of :class:`LPModel`: ``status`` 'optimal', 'infeasible' or 'limit' (both runs of the solve
+    stopped at the per-solve budget, :meth:`LPModel.solve`); on 'optimal', ``x`` (n,) the solution in the
+    model's original coordinates (float, unverified), ``z`` (n,) the same as a shift from the centre; on
+    'optimal' and 'limit', ``duals`` (m,) the row duals of the ORIGINAL (unscaled) rows for the ORIGINAL cost
+    (zeros when HiGHS gives none, then ``dual_valid`` is False), usable as the dual guess of :class:`SafeBound`
+    (at a limit: those HiGHS holds, not optimal, still a valid guess); ``iterations`` the simplex iterations of
+    this solve (both runs)."""
 
     status: str
     x: np.ndarray | None = None
@@ -208,10 +247,18 @@ class LPModel:
 
     xl, xu : (n,) finite column bounds; center : (n,) the origin of HiGHS's coordinates (default the
     midpoint of the box); col_scale : (n,) powers of two (default 1, see :meth:`scale_columns`);
-    tolerance : primal/dual feasibility tolerance; options : further HiGHS options (default ``presolve='off'``).
+    tolerance : primal/dual feasibility tolerance; iteration_limit, time_limit : the per-solve budgets of each
+    HiGHS run (simplex iterations, seconds of wall time; None: the defaults of :meth:`budgets`, from the model's
+    size; ``math.inf``: none); dual_after_rows : a solve whose only change since the last one is added rows
+    runs the dual simplex (the previous basis stays dual feasible when rows are added, while the primal simplex
+    restarts from an infeasible point); options : further HiGHS options (default ``presolve='off'``).
+    Counters: ``solves`` (HiGHS runs), ``iterations``, ``limit_hits``, ``retries``, ``fallbacks`` (module
+    docstring).
     """
 
-    def __init__(self, xl, xu, *, center=None, col_scale=None, tolerance: float | None = 1e-9, **options) -> None:
+    def __init__(self, xl, xu, *, center=None, col_scale=None, tolerance: float | None = 1e-9,
+                 iteration_limit: float | None = None, time_limit: float | None = None,
+                 dual_after_rows: bool = False, **options) -> None:
         self.xl = np.asarray(xl, dtype=float)
         self.xu = np.asarray(xu, dtype=float)
         n = self.xl.size
@@ -221,12 +268,39 @@ class LPModel:
         self.center = 0.5 * self.xl + 0.5 * self.xu if center is None else np.asarray(center, dtype=float)
         self.d = np.ones(n) if col_scale is None else np.asarray(col_scale, dtype=float)
         self.r = np.zeros(0)  # the row factors, in insertion order
-        self.iterations = 0
-        self.solves = 0
+        for name, value in (("iteration_limit", iteration_limit), ("time_limit", time_limit)):
+            if value is not None and (isinstance(value, bool) or not value > 0):
+                raise ValueError(f"{name} must be None or a number > 0, got {value!r}")
+        self.iteration_limit, self.time_limit = iteration_limit, time_limit
+        self.dual_after_rows = bool(dual_after_rows)
+        self.iterations = self.solves = self.limit_hits = self.retries = self.fallbacks = 0
         self._norm: float | None = None
+        self._rows_added = self._cost_changed = False  # since the last solve
         self._cols = np.arange(n, dtype=np.int32)
         self.highs = new_highs(tolerance, **{"presolve": "off", **options})
+        self._strategy = self._option("simplex_strategy")
         check(self.highs.addVars(n, (self.xl - self.center) / self.d, (self.xu - self.center) / self.d), "addVars")
+
+    def _option(self, name: str):
+        value = self.highs.getOptionValue(name)
+        return value[1] if isinstance(value, tuple) else value  # (status, value) in some highspy versions
+
+    def budgets(self) -> tuple[int, float]:
+        """The per-run budgets of the next solve: (simplex iteration limit, wall-time limit [s]).
+
+        Defaults (module constants): ``max(ITERATIONS_FLOOR, ITERATIONS_PER_LINE (m + n))`` iterations and
+        ``max(SECONDS_FLOOR, SECONDS_PER_ENTRY m n)`` seconds for the model's current m rows and n columns:
+        far above what a cold solve of such a model takes, far below a stuck one. The values given to the
+        constructor (or set on the attributes ``iteration_limit``, ``time_limit``) replace them.
+        """
+        m, n = self.m, self.n
+        its = self.iteration_limit
+        if its is None:
+            its = max(ITERATIONS_FLOOR, ITERATIONS_PER_LINE * (m + n))
+        secs = self.time_limit
+        if secs is None:
+            secs = max(SECONDS_FLOOR, SECONDS_PER_ENTRY * m * n)
+        return int(min(its, _MAX_ITERATIONS)), float(secs)
 
     @property
     def m(self) -> int:
@@ -249,6 +323,7 @@ class LPModel:
         r = np.ones(A.shape[0]) if row_scale is None else power2_scale(row_scale)
         add_dense_rows(self.highs, A * self.d * r[:, None], lo_shift * r, hi_shift * r)
         self.r = np.concatenate([self.r, r])
+        self._rows_added = self._rows_added or r.size > 0
 
     def add_sparse_rows(self, starts, index, values, lo, hi, row_scale=None) -> None:
         """Append sparse rows ``lo <= A x <= hi`` in compressed row form (original coordinates): row i holds
@@ -278,12 +353,14 @@ class LPModel:
         check(self.highs.addRows(k, lo_s, hi_s, values.size, starts.astype(np.int32), index, scaled),
               f"addRows ({k} rows)")
         self.r = np.concatenate([self.r, r])
+        self._rows_added = True
 
     def set_bounds(self, xl, xu) -> None:
         """Change every column's bounds (original coordinates), e.g. a branch-and-bound node."""
         self.xl, self.xu = np.asarray(xl, dtype=float), np.asarray(xu, dtype=float)
         check(self.highs.changeColsBounds(self.n, self._cols, (self.xl - self.center) / self.d,
                                           (self.xu - self.center) / self.d), "changeColsBounds")
+        self._cost_changed = True  # the basis may lose primal feasibility: not a rows-only change
 
     def basis(self):
         """HiGHS's current basis (to warm-start a later model of the same shape, :meth:`set_basis`)."""
@@ -304,37 +381,42 @@ class LPModel:
             norm = 1.0
         check(self.highs.changeColsCost(self.n, self._cols, cd / norm), "changeColsCost")
         self._norm = norm
+        self._cost_changed = True
 
-    def _run(self):
-        """One ``run`` of HiGHS: (model status, simplex iterations); LPError if ``run`` itself fails."""
-        run_status = self.highs.run()
+    def _run(self, strategy: int | None = None):
+        """One ``run`` of HiGHS under the per-solve budgets (:meth:`budgets`, the time limit re-armed), with the
+        simplex strategy ``strategy`` for this run only (None: the model's). Returns (model status, simplex
+        iterations); LPError if ``run`` itself fails."""
+        h = self.highs
+        its, secs = self.budgets()
+        check(h.setOptionValue("simplex_iteration_limit", its), f"option simplex_iteration_limit={its}")
+        arm_time_limit(h, secs)
+        switch = strategy is not None and strategy != self._strategy
+        if switch:
+            check(h.setOptionValue("simplex_strategy", strategy), f"option simplex_strategy={strategy}")
+        try:
+            run_status = h.run()
+        finally:
+            if switch:
+                check(h.setOptionValue("simplex_strategy", self._strategy), f"option simplex_strategy={self._strategy}")
         self.solves += 1
         check(run_status, "run")
-        it = int(self.highs.getInfo().simplex_iteration_count)
+        it = int(h.getInfo().simplex_iteration_count)
         self.iterations += it
-        return self.highs.getModelStatus(), it
-
-    def _retry(self, it: int):
-        """The LP once more from a cold start with HiGHS's default simplex (the model and its rows are kept; the
-        strategy is restored afterwards). Returns (model status, iterations of both runs)."""
-        h = self.highs
-        strategy = h.getOptionValue("simplex_strategy")
-        strategy = strategy[1] if isinstance(strategy, tuple) else strategy  # (status, value) in some highspy
-        h.clearSolver()
-        check(h.setOptionValue("simplex_strategy", 1), "option simplex_strategy=1")
-        try:
-            ms, it2 = self._run()
-        finally:
-            check(h.setOptionValue("simplex_strategy", strategy), f"option simplex_strategy={strategy!r}")
-        return ms, it + it2
+        ms = h.getModelStatus()
+        self.limit_hits += ms in _LIMITS
+        return ms, it
 
     def solve(self, cost=None) -> LPSolution:
-        """Solve ``min cost^T x`` warm-started from the previous basis; :class:`LPError` unless HiGHS finds the
-        LP optimal or infeasible (any other model status, an error of ``run``, a solution without values).
+        """Solve ``min cost^T x`` warm-started from the previous basis, under the per-solve budgets.
 
         cost : (n,) finite, not zero (None: the previous solve's cost, e.g. after rows were added). HiGHS sees
         ``(cost d) / max |cost d|`` (the unit vector itself when cost is one); the returned duals are those of
-        the original rows and cost: ``y_k = r_k y'_k max |cost d|``.
+        the original rows and cost: ``y_k = r_k y'_k max |cost d|``. A run that ends neither optimal nor
+        infeasible (a limit, or e.g. "Unknown" from a warm start on a degenerate basis) is run once more from a
+        cold start with the dual simplex; if that stops at a limit too, the solution has the status 'limit'
+        and the duals HiGHS holds (the next solve then starts cold). :class:`LPError` for any other failure
+        (another model status, an error of ``run``, a solution without values).
         """
         h = self.highs
         if cost is not None:
@@ -342,20 +424,42 @@ class LPModel:
         elif self._norm is None:
             raise LPError("no cost set: pass one to the first solve")
         norm = self._norm
-        ms, it = self._run()
-        if ms not in (_OPTIMAL, _INFEASIBLE):  # e.g. "Unknown" from a warm start on a degenerate basis:
-            ms, it = self._retry(it)  # once more from a cold start with HiGHS's default (dual) simplex
+        rows_only = self.dual_after_rows and self._rows_added and not self._cost_changed
+        self._rows_added = self._cost_changed = False
+        ms, it = self._run(_DUAL_SIMPLEX if rows_only else None)
+        if ms not in (_OPTIMAL, _INFEASIBLE):
+            self.retries += 1
+            h.clearSolver()
+            ms, it2 = self._run(_DUAL_SIMPLEX)
+            it += it2
         if ms == _INFEASIBLE:
             return LPSolution("infeasible", iterations=it)
         sol = h.getSolution()
+        if ms in _LIMITS:
+            self.fallbacks += 1
+            rd, valid = self._row_duals(sol)
+            h.clearSolver()  # the next solve starts cold, not from the basis where this one stopped
+            return LPSolution("limit", duals=rd * self.r * norm, iterations=it, dual_valid=valid)
         if ms != _OPTIMAL or not sol.value_valid or len(sol.col_value) != self.n:
             raise LPError(f"HiGHS did not solve the LP: {h.modelStatusToString(ms)}")
-        rd = np.asarray(sol.row_dual) if sol.dual_valid else np.zeros(self.m)
-        if rd.size != self.m:
-            raise LPError(f"HiGHS returned {rd.size} row duals for {self.m} rows")
+        rd, valid = self._row_duals(sol)
         z = np.asarray(sol.col_value) * self.d
         return LPSolution("optimal", x=self.center + z, z=z, duals=rd * self.r * norm, iterations=it,
-                          dual_valid=bool(sol.dual_valid))
+                          dual_valid=valid)
+
+    def _row_duals(self, sol) -> tuple[np.ndarray, bool]:
+        """HiGHS's row duals of the scaled rows (zeros when it gives none) and whether it gave them."""
+        if not sol.dual_valid:
+            return np.zeros(self.m), False
+        rd = np.asarray(sol.row_dual, dtype=float)
+        if rd.size != self.m:
+            raise LPError(f"HiGHS returned {rd.size} row duals for {self.m} rows")
+        return rd, True
+
+    def counters(self) -> dict:
+        """``{'lp_solves', 'lp_iterations', 'lp_limit_hits', 'lp_retries', 'lp_fallbacks'}`` (ints) so far."""
+        return {"lp_solves": self.solves, "lp_iterations": self.iterations, "lp_limit_hits": self.limit_hits,
+                "lp_retries": self.retries, "lp_fallbacks": self.fallbacks}
 
 
 # ------------------------------------------------------------------------------------------ the safe bound

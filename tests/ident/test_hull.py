@@ -17,6 +17,8 @@ from scipy.optimize import linprog
 
 from h4bench import ident
 from h4bench.ident.estimators.hull import chebyshev, interval_hull, safe_lower_bound, strip_bounds
+from h4bench.ident.numerics import lp
+from h4bench.ident.numerics.lp import LPModel
 from tests.conftest import bounded_noise_problem
 
 
@@ -306,3 +308,107 @@ def test_interval_hull_reports_infeasible_working_set():
     bl, bu = strip_bounds(y, np.ones(50))
     res = interval_hull(W, bl, bu, np.zeros(3), 2 * np.ones(3))
     assert res.status == "infeasible"
+
+
+# ------------------------------------------------------------------------------------ per-solve budgets
+def _budget_problem():
+    """1500 rows, 8 parameters, bound 1, prior [0, 3]^8 (the truth inside), and the least-squares centre."""
+    rng = np.random.default_rng(5)
+    W, theta, y = bounded_noise_problem(rng, 1500, 8)
+    lo, hi = np.zeros(8), 3.0 * np.ones(8)
+    P = {"W": W, "y": y, "b": np.ones(1500), "lo": lo, "hi": hi, "theta": theta}
+    return P, np.linalg.lstsq(W, y, rcond=None)[0]
+
+
+@pytest.fixture(scope="module")
+def budget_problem():
+    P, center = _budget_problem()
+    lp_lo, lp_hi, points = linprog_endpoints(P["W"], P["y"], P["b"], P["lo"], P["hi"])
+    # verified points of S next to linprog's optima: the exact hull's endpoints lie beyond them
+    z = np.array([[verified_feasible_point(points[k, i], P)[i] for i in range(8)] for k in (0, 1)])
+    return P, center, z
+
+
+def _assert_outer(res, P, z):
+    """The box contains the exact hull (verified points of S at linprog's optima) and lies in the prior."""
+    assert np.all(res.lower <= z[0]) and np.all(res.upper >= z[1])
+    assert np.all(res.lower >= P["lo"]) and np.all(res.upper <= P["hi"])
+
+
+@pytest.mark.parametrize("limit", [1, 20])
+def test_lps_stopped_by_their_budget_fall_back_to_safe_endpoints(budget_problem, limit):
+    """An iteration limit of 1 (every LP stops) or 20 (a few cold solves stop): not stuck, counted, the box
+    still contains the exact hull; the endpoints that did not fall back are the unlimited run's."""
+    P, center, z = budget_problem
+    bl, bu = strip_bounds(P["y"], P["b"])
+    full = interval_hull(P["W"], bl, bu, P["lo"], P["hi"], center=center)
+    assert full.info["lp_limit_hits"] == full.info["lp_fallbacks"] == 0 and full.info["converged"]
+    res = interval_hull(P["W"], bl, bu, P["lo"], P["hi"], center=center, lp_budget={"iteration_limit": limit})
+    info = res.info
+    fell = np.array(info["lp_fallback_endpoints"], dtype=int)
+    assert fell.size == info["lp_fallbacks"] >= 1 and not info["converged"]
+    assert info["lp_retries"] >= info["lp_fallbacks"] and info["lp_limit_hits"] >= 2 * info["lp_fallbacks"]
+    _assert_outer(res, P, z)
+    _assert_outer(full, P, z)
+    ends = np.r_[res.lower, -res.upper]
+    full_ends = np.r_[full.lower, -full.upper]
+    kept = np.setdiff1d(np.arange(16), fell)
+    np.testing.assert_allclose(ends[kept], full_ends[kept], rtol=0, atol=1e-9)
+    assert np.all(ends[fell] <= full_ends[fell])  # a fallback is coarser, never narrower
+    if limit == 1:
+        assert fell.size == 16 and info["lp_iterations"] <= 2 * info["lp_solves"]
+    else:  # the dual simplex stopped at 20 iterations holds informative duals: better than the prior
+        assert np.any(ends[fell] > np.r_[P["lo"], -P["hi"]][fell])
+
+
+def test_an_lp_stopped_after_earlier_solves_keeps_their_duals(budget_problem, monkeypatch):
+    """Every run after the 6th stops at 1 iteration: the LPs solved before keep their endpoints; an LP whose
+    re-solve (rows added) stopped gets the safe bound of its earlier optimal duals, not the prior."""
+    P, center, z = budget_problem
+    bl, bu = strip_bounds(P["y"], P["b"])
+    budgets = LPModel.budgets
+    monkeypatch.setattr(LPModel, "budgets", lambda self: (1 if self.solves >= 6 else budgets(self)[0], np.inf))
+    res = interval_hull(P["W"], bl, bu, P["lo"], P["hi"], center=center)
+    fell = res.info["lp_fallback_endpoints"]
+    assert 0 < len(fell) < 16 and res.info["lp_fallbacks"] == len(fell)
+    _assert_outer(res, P, z)
+    ends, prior_ends = np.r_[res.lower, -res.upper], np.r_[P["lo"], -P["hi"]]
+    assert np.any(ends[fell] > prior_ends[fell] + 1e-6)
+
+
+def test_estimate_reports_the_budget_counters_and_warns_on_fallbacks(budget_problem, monkeypatch):
+    P, _, z = budget_problem
+    prior = ident.Box(P["lo"], P["hi"], names=tuple("abcdefgh"))
+    box = ident.estimate(P["W"], P["y"], 1.0, prior, method="hull")
+    assert {k: box.info[k] for k in ("lp_limit_hits", "lp_retries", "lp_fallbacks")} == dict.fromkeys(
+        ("lp_limit_hits", "lp_retries", "lp_fallbacks"), 0)
+    assert box.info["lp_fallback_parameters"] == [] and box.info["lp_solves"] > 0
+    monkeypatch.setattr(lp, "ITERATIONS_FLOOR", 3)  # the defaults of every model: 3 iterations per run
+    monkeypatch.setattr(lp, "ITERATIONS_PER_LINE", 0)
+    with pytest.warns(ident.LPFallbackWarning, match="per-solve budget") as record:
+        cut = ident.estimate(P["W"], P["y"], 1.0, prior, method="hull")
+    info = cut.info
+    assert info["lp_fallbacks"] >= 1 and info["lp_limit_hits"] >= 2 and info["lp_retries"] >= 1
+    assert info["lp_fallback_parameters"] and set(info["lp_fallback_parameters"]) <= set("abcdefgh")
+    assert any(name in str(w.message) for w in record for name in info["lp_fallback_parameters"])
+    assert np.all(cut.lower <= z[0]) and np.all(cut.upper >= z[1]) and cut.contains(P["theta"]).all()
+    assert np.all(cut.lower <= box.lower) and np.all(cut.upper >= box.upper)
+
+
+def test_chebyshev_stopped_by_its_budget_still_brackets_the_minimax(monkeypatch):
+    rng = np.random.default_rng(3)
+    n, p = 500, 6
+    W = rng.standard_normal((n, p))
+    y = W @ rng.uniform(0, 1, p) + rng.uniform(-2, 2, n)
+    lo, hi = np.zeros(p), np.ones(p)
+    A = np.block([[W, -np.ones((n, 1))], [-W, -np.ones((n, 1))]])
+    ref = linprog(np.r_[np.zeros(p), 1.0], A_ub=A, b_ub=np.r_[y, -y], bounds=list(zip(lo, hi)) + [(0, None)],
+                  method="highs").fun
+    budgets = LPModel.budgets
+    for after in (0, 1):  # every run stops; or every run after the first solve (an earlier optimum kept)
+        monkeypatch.setattr(LPModel, "budgets", lambda self: (5 if self.solves >= after else budgets(self)[0], np.inf))
+        with pytest.warns(ident.LPFallbackWarning, match="per-solve budget"):
+            ch = chebyshev(W, y, np.ones(n), lo, hi, initial_rows=40, add_per_round=20)
+        assert ch.info["lp_fallback"] and ch.info["lp_fallbacks"] == 1 and not ch.info["converged"]
+        assert 0.0 <= ch.lower <= ref <= ch.upper
+        assert np.max(np.abs(y - W @ ch.theta)) <= ch.upper

@@ -3,10 +3,12 @@ an independent build and interface)."""
 
 from __future__ import annotations
 
+import highspy
 import numpy as np
 import pytest
 from scipy.optimize import linprog
 
+from h4bench.ident.numerics import lp
 from h4bench.ident.numerics.lp import LPError, LPModel, SafeBound, SafeBounds, column_scale, power2_scale, safe_lower_bound
 
 
@@ -167,3 +169,90 @@ def test_safe_bounds_of_many_lps_at_once_agree_with_one_by_one_and_stay_below_li
                     assert mu[j] == pytest.approx(refs[j], abs=1e-6 * scale)
     with pytest.raises(ValueError, match="finite"):
         many.over(np.full(4, -np.inf), xu)
+
+
+# ------------------------------------------------------------------------------------------ per-solve budgets
+def _strips(rng, m, n):
+    """Hull-like LP rows ``|A x - a| <= 1`` around a random x_star (A standard normal), box x_star +- 3."""
+    A = rng.normal(size=(m, n))
+    x_star = rng.uniform(-1.0, 1.0, n)
+    a = A @ x_star + rng.uniform(-0.9, 0.9, m)
+    return A, a - 1.0, a + 1.0, x_star - 3.0, x_star + 3.0, x_star
+
+
+def test_a_solve_stopped_at_its_iteration_limit_is_retried_cold_once_then_reports_the_limit():
+    rng = np.random.default_rng(3)
+    A, lo, hi, xl, xu, x_star = _strips(rng, 400, 12)
+    model = LPModel(xl, xu, center=x_star, iteration_limit=1)
+    model.add_rows(A, lo, hi)
+    c = rng.normal(size=12)
+    ref = linprog(c, A_ub=np.vstack([A, -A]), b_ub=np.concatenate([hi, -lo]), bounds=list(zip(xl, xu)), method="highs")
+    sol = model.solve(c)
+    assert sol.status == "limit" and sol.x is None and sol.iterations <= 2
+    assert model.counters() == {"lp_solves": 2, "lp_iterations": sol.iterations, "lp_limit_hits": 2,
+                                "lp_retries": 1, "lp_fallbacks": 1}
+    assert sol.dual_valid and sol.duals.shape == (400,)
+    assert safe_lower_bound(A, lo, hi, xl, xu, c, sol.duals) <= ref.fun  # the duals at the limit: a valid guess
+    # the budget lifted, the same model solves it (cold: the basis where it stopped was dropped), as linprog does
+    model.iteration_limit = None
+    sol = model.solve(c)
+    assert sol.status == "optimal" and c @ sol.x == pytest.approx(ref.fun, abs=1e-7 * np.abs(c) @ (xu - xl))
+    assert (model.limit_hits, model.retries, model.fallbacks) == (2, 1, 1)
+
+
+def test_the_time_limit_is_rearmed_for_every_run():
+    """HiGHS's ``time_limit`` is compared with the run time of the whole ``Highs`` object (the control at the
+    end); LPModel re-arms it per run, so solves keep succeeding long after the runs together used the budget."""
+    rng = np.random.default_rng(4)
+    A, lo, hi, xl, xu, x_star = _strips(rng, 300, 10)
+    model = LPModel(xl, xu, center=x_star, time_limit=1e-9)
+    model.add_rows(A, lo, hi)
+    assert model.solve(rng.normal(size=10)).status == "limit" and model.limit_hits == 2
+    budget = 0.05  # [s] per run; one cold solve of this LP takes about 1 ms
+    model.time_limit = budget
+    h = model.highs
+    solves = 0
+    while h.getRunTime() < 4 * budget and solves < 2000:
+        h.clearSolver()  # cold: every run does the whole work
+        assert model.solve(rng.normal(size=10)).status == "optimal"
+        solves += 1
+    assert h.getRunTime() >= 4 * budget and model.limit_hits == 2 and model.fallbacks == 1
+    # the control: HiGHS's own limit, set once, stops at once every run after the object's total exceeded it
+    assert h.setOptionValue("time_limit", budget) != highspy.HighsStatus.kError
+    h.clearSolver()
+    h.run()
+    assert h.getModelStatus() == highspy.HighsModelStatus.kTimeLimit
+
+
+def test_budgets_default_from_the_size_and_are_checked():
+    model = LPModel(np.zeros(3), np.ones(3))
+    its, secs = model.budgets()
+    assert its == lp.ITERATIONS_FLOOR and secs == lp.SECONDS_FLOOR  # a small model: the floors
+    model.add_rows(np.ones((100_000, 3)), np.zeros(100_000), np.ones(100_000))
+    its, secs = model.budgets()
+    assert its == lp.ITERATIONS_PER_LINE * 100_003 and secs == max(lp.SECONDS_FLOOR, lp.SECONDS_PER_ENTRY * 300_000)
+    assert LPModel(np.zeros(3), np.ones(3), iteration_limit=np.inf, time_limit=np.inf).budgets() == (2**31 - 1, np.inf)
+    for bad in (0, -1.0, True):
+        with pytest.raises(ValueError, match="iteration_limit"):
+            LPModel(np.zeros(3), np.ones(3), iteration_limit=bad)
+        with pytest.raises(ValueError, match="time_limit"):
+            LPModel(np.zeros(3), np.ones(3), time_limit=bad)
+
+
+def test_dual_simplex_after_added_rows_solves_the_same_lps():
+    """``dual_after_rows``: a re-solve after rows were added (same cost) runs the dual simplex for that run only;
+    the optima are linprog's, and the model's own strategy (primal) is back afterwards."""
+    rng = np.random.default_rng(8)
+    A, lo, hi, xl, xu, x_star = _strips(rng, 600, 8)
+    model = LPModel(xl, xu, center=x_star, dual_after_rows=True, simplex_strategy=4)
+    model.add_rows(A[:100], lo[:100], hi[:100])
+    c = rng.normal(size=8)
+    assert model.solve(c).status == "optimal"
+    for k in range(100, 600, 100):
+        model.add_rows(A[k:k + 100], lo[k:k + 100], hi[k:k + 100])
+        sol = model.solve()
+        ref = linprog(c, A_ub=np.vstack([A[:k + 100], -A[:k + 100]]), b_ub=np.concatenate([hi[:k + 100], -lo[:k + 100]]),
+                      bounds=list(zip(xl, xu)), method="highs")
+        assert sol.status == "optimal" and c @ sol.x == pytest.approx(ref.fun, abs=1e-7 * np.abs(c) @ (xu - xl))
+        strategy = model.highs.getOptionValue("simplex_strategy")
+        assert (strategy[1] if isinstance(strategy, tuple) else strategy) == 4

@@ -127,3 +127,26 @@ def test_bad_inputs_are_named():
     with pytest.raises(ValueError, match="prior must be finite"):
         OnlineHull((np.zeros(3), np.full(3, np.inf)))
     assert hull.rows_seen == 0  # nothing was added by the rejected updates
+
+
+def test_endpoints_stopped_by_the_lp_budget_keep_safe_bounds(monkeypatch):
+    """Every HiGHS run limited to 3 iterations: the updates still end, the fallbacks are counted, and every box
+    contains the unlimited online hull's box at the same row (itself linprog's hull: the tests above)."""
+    from h4bench.ident.numerics import lp
+    from tests.conftest import bounded_noise_problem
+
+    W, theta, y = bounded_noise_problem(np.random.default_rng(2), 600, 4)
+    prior = (np.zeros(4), 3 * np.ones(4))
+
+    def boxes():
+        hull = OnlineHull(prior)
+        return [hull.update(W[s:s + 150], y[s:s + 150], 1.0) for s in range(0, 600, 150)], hull.stats
+
+    full, stats = boxes()
+    assert stats["lp_limit_hits"] == stats["lp_fallbacks"] == 0
+    monkeypatch.setattr(lp, "ITERATIONS_FLOOR", 3)
+    monkeypatch.setattr(lp, "ITERATIONS_PER_LINE", 0)
+    cut, stats = boxes()
+    assert stats["lp_fallbacks"] >= 1 and stats["lp_retries"] >= stats["lp_fallbacks"]
+    for a, b in zip(cut, full):
+        assert np.all(a.lower <= b.lower) and np.all(a.upper >= b.upper) and a.contains(theta).all()

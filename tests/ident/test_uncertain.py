@@ -24,7 +24,10 @@ from scipy.optimize import linprog
 
 from h4bench import ident
 from h4bench.ident.processing.filtering import ProcessingSettings, default_edge_samples, parallel_filter
+from h4bench.ident.estimators import uncertain_signed
 from h4bench.ident.estimators.uncertain import uncertain_hull
+from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
+from h4bench.ident.numerics import lp
 from h4bench.ident.robots.h4_interval import (
     Distortion,
     encoder_radii,
@@ -279,3 +282,57 @@ def test_interval_equation_encloses_a_noise_free_recording(geometry, exact_recor
     hi_v = ieq.y - ieq.bound - (ieq.Wc + ieq.D) @ theta
     assert max(lo_v.max(), hi_v.max()) <= 0.0
     assert isinstance(dist, Distortion) and dist.regressor.shape == (4, 14)
+
+
+def _op_problem(m=600, p=5, seed=11):
+    rng = np.random.default_rng(seed)
+    theta = rng.uniform(0.5, 1.5, p)
+    Wc = rng.standard_normal((m, p)) * 10.0 ** rng.uniform(-1, 1, p)
+    D = rng.uniform(0, 0.05, (m, p)) * np.abs(Wc)
+    y = (Wc + rng.uniform(-1, 1, (m, p)) * D) @ theta + rng.uniform(-0.5, 0.5, m)
+    return Wc, D, y, theta
+
+
+def test_uncertain_hull_counts_budget_fallbacks_and_stays_outer(monkeypatch):
+    """Every HiGHS run limited to 3 iterations: the LPs fall back (counted, warned, named), and the box still
+    contains the unlimited run's box (itself linprog's hull: test_interval_hull_converges_and_is_tight_on_many_rows)."""
+    Wc, D, y, theta = _op_problem()
+    prior = ident.Box(np.zeros(5), 3 * np.ones(5), names=("a", "b", "c", "d", "e"))
+    full = uncertain_hull(Wc, D, y, 0.5, prior)
+    assert (full.info["lp_limit_hits"], full.info["lp_retries"], full.info["lp_fallbacks"]) == (0, 0, 0)
+    assert full.info["lp_fallback_parameters"] == []
+    monkeypatch.setattr(lp, "ITERATIONS_FLOOR", 3)
+    monkeypatch.setattr(lp, "ITERATIONS_PER_LINE", 0)
+    with pytest.warns(ident.LPFallbackWarning, match="per-solve budget") as record:
+        cut = uncertain_hull(Wc, D, y, 0.5, prior)
+    info = cut.info
+    assert info["lp_fallbacks"] >= 1 and info["lp_retries"] >= 1 and info["lp_limit_hits"] >= 2
+    assert info["lp_fallback_parameters"] and set(info["lp_fallback_parameters"]) <= set("abcde")
+    assert any(name in str(w.message) for w in record for name in info["lp_fallback_parameters"])
+    assert np.all(cut.lower <= full.lower) and np.all(cut.upper >= full.upper) and cut.contains(theta).all()
+    assert np.all(cut.lower >= prior.lower) and np.all(cut.upper <= prior.upper)
+
+
+def test_signed_hull_sums_the_budget_counters_over_its_rounds(monkeypatch):
+    Wc, D, y, theta = _op_problem(400, 4, seed=3)
+    prior = ident.Box(-3 * np.ones(4), 3 * np.ones(4), names=("a", "b", "c", "d"))
+    full = signed_uncertain_hull(Wc, D, y, 0.5, prior, refine=2)
+    calls = []
+    real = uncertain_hull
+
+    def spy(*args, **kwargs):
+        box = real(*args, **kwargs)
+        calls.append(box.info)
+        return box
+
+    monkeypatch.setattr(uncertain_signed, "uncertain_hull", spy)
+    monkeypatch.setattr(lp, "ITERATIONS_FLOOR", 4)
+    monkeypatch.setattr(lp, "ITERATIONS_PER_LINE", 0)
+    with pytest.warns(ident.LPFallbackWarning, match="per-solve budget"):
+        cut = signed_uncertain_hull(Wc, D, y, 0.5, prior, refine=2)
+    assert len(calls) == 3
+    for key in ("lp_solves", "lp_iterations", "lp_limit_hits", "lp_retries", "lp_fallbacks"):
+        assert cut.info[key] == sum(c[key] for c in calls)
+    assert cut.info["lp_fallbacks"] >= 1
+    assert set(cut.info["lp_fallback_parameters"]) == set().union(*(c["lp_fallback_parameters"] for c in calls))
+    assert np.all(cut.lower <= full.lower) and np.all(cut.upper >= full.upper) and cut.contains(theta).all()

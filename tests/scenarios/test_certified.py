@@ -119,6 +119,8 @@ def test_identify_with_a_spec_gives_the_certified_box(run_and_spec, tmp_path):
     m = result["methods"]["certified"]
     assert m["status"] == "ok" and result["bound"] is None
     assert np.all(np.asarray(m["lower"]) <= run_.theta_true) and np.all(run_.theta_true <= np.asarray(m["upper"]))
+    budget = {k: m["info"][k] for k in ("lp_limit_hits", "lp_retries", "lp_fallbacks", "lp_fallback_parameters")}
+    assert budget == {"lp_limit_hits": 0, "lp_retries": 0, "lp_fallbacks": 0, "lp_fallback_parameters": []}
     assert result["error_model"]["sources"]["torque_error"].startswith("the simulator")
     assert json.loads((tmp_path / "o" / "result.json").read_text())["rows"] == result["rows"] > 0
     bad = CliRunner().invoke(app, ["identify", str(log), "--spec", str(spec_file), "--bound", "1.5",

@@ -67,6 +67,9 @@ def test_identify_spec_encloses_the_truth(synthetic_csv):
     assert m["status"] == "ok" and r["consistent"] is True
     assert all(lo <= t <= hi for lo, t, hi in zip(m["lower"], theta, m["upper"]))
     assert m["narrowed_parameters"] > 0
+    budget = {k: m["info"][k] for k in ("lp_limit_hits", "lp_retries", "lp_fallbacks", "lp_fallback_parameters")}
+    assert budget == {"lp_limit_hits": 0, "lp_retries": 0, "lp_fallbacks": 0, "lp_fallback_parameters": []}
+    assert m["info"]["lp_solves"] > 0
     assert r["error_model"]["file"] == str(toml) and r["error_model"]["torque_error"] == [0.5] * 6
     assert r["error_model"]["sources"]["torque_error"].startswith("the synthetic")
     assert r["certified"]["spec_check"]["contradicted"] == [] and r["certified"]["rows"] > 0
