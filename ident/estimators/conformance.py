@@ -43,6 +43,7 @@ import numpy as np
 from h4bench.ident.box import Box
 from h4bench.ident.errors import EstimatorError, InconsistentDataError
 from h4bench.ident.estimators import registry
+from h4bench.ident.estimators.door import InputsChanged
 from h4bench.ident.estimators.estimate import estimate, min_consistent_bound
 from h4bench.ident.estimators.proof import excluded_point, proven_points
 
@@ -270,6 +271,8 @@ def _check_problem(est, problem: Problem) -> list[CheckResult]:
             out.append(CheckResult("outer", name, FAIL, detail, proof))
     # inputs
     changed = [k for k, arr, copy in before if not np.array_equal(arr, copy)]
+    if isinstance(error, InputsChanged):  # a plugin changed them in its child process (ours are untouched)
+        changed += [f"{k} (in its process)" for k in error.inputs]
     out.append(CheckResult("inputs", name, FAIL if changed else PASS,
                            f"changed {changed}" if changed else "unchanged"))
     out.append(CheckResult("time", name, PASS, f"{seconds:.3g} s (the exact hull: {hull_seconds:.3g} s)",
