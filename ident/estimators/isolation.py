@@ -27,8 +27,8 @@ from h4bench.ident.box import Box
 from h4bench.ident.estimators import registry
 from h4bench.ident.estimators.door import InputsChanged, Isolated, MethodTimeout, readonly, source_hash
 
-__all__ = ["InputsChanged", "MethodTimeout", "Resolved", "available", "call", "forget", "readonly", "resolve",
-           "source_hash"]
+__all__ = ["InputsChanged", "MethodTimeout", "Resolved", "available", "call", "contained", "forget", "readonly",
+           "resolve", "source_hash"]
 
 
 @dataclass(frozen=True)
@@ -86,5 +86,11 @@ def call(method, W, y, bound, prior, timeout: float | None = None, **context) ->
         inputs = {k: readonly(v) for k, v in context.items()}
         with contextlib.redirect_stdout(sys.stderr):
             return registry.call(est, readonly(W), readonly(y), readonly(bound), prior, **inputs)
+    return registry.call(contained(est, timeout), W, y, bound, prior, **context)
+
+
+def contained(est: registry.Estimator, timeout: float | None = None) -> registry.Estimator:
+    """``est`` (a :class:`registry.Estimator`) with ``func`` an :class:`~ident.estimators.door.Isolated` of time
+    limit ``timeout`` [s] (None: no limit): every call of it runs in a forked child, a built-in or a callable too."""
     door = est.func if isinstance(est.func, Isolated) else Isolated(est.name, est.origin, est.resolve())
-    return registry.call(replace(est, func=door.limited(timeout)), W, y, bound, prior, **context)
+    return replace(est, func=door.limited(timeout))
