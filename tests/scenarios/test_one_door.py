@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from h4bench import ident
-from tests.scenarios.plugin_cases import fake_distribution
+from tests.scenarios.plugin_cases import fake_distribution, prefix_run
 
 ROOT = Path(__file__).resolve().parents[2]
 WALKED = ("ident", "scenarios", "trajectories", "sim", "h4bench", "benchmarks")
@@ -170,16 +170,9 @@ def door(tmp_path, monkeypatch):
     isolation.forget()
 
 
-class _Rows(SimpleNamespace):
-    def __len__(self) -> int:
-        return len(self.y)
-
-
 def _fake_run(d):
     """What box_history reads of an ExperimentRun: 20 samples of 4 rows, no box yet (every point estimated)."""
-    eq = _Rows(W=d.W, y=d.y, bound=d.bound, sample=np.repeat(np.arange(20), 4), names=d.prior.names)
-    return SimpleNamespace(equation=eq, dataset=SimpleNamespace(t=np.linspace(0.0, 1.9, 20)), theta_true=np.ones(3),
-                           prior=d.prior, boxes={}, failures={}, spec={})
+    return prefix_run(d.W, d.y, d.bound, d.prior)
 
 
 def case_estimate(d):
