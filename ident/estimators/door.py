@@ -226,7 +226,6 @@ def forked(work, timeout: float | None, what: str):
                          "result")
 
 
-
 # --------------------------------------------------------------------------------------------- provenance
 def module_source(module_name: str) -> dict:
     mod = sys.modules.get(module_name)
