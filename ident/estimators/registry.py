@@ -437,6 +437,9 @@ def call(est, W, y, bound, prior, **context) -> Box:
     ``instruments``, a built-in's ``check_consistency``, ...; ``groups`` and ``instruments`` are checked.
     Returns the Box (an estimator may also return a ``(lower, upper)`` pair: it becomes a Box with the prior's
     names); EstimatorError naming the estimator if it is not a box of the prior's shape, finite, with lower <= upper.
+    A plugin named by a string runs in a child process (:func:`get` gives it as an
+    :class:`~ident.estimators.door.Isolated`): what it raised, an exit, a crash or a change of its inputs comes back
+    as an EstimatorError naming it.
     """
     est = get(est)
     func = est.resolve()
