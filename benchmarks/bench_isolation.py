@@ -1,6 +1,6 @@
 """What it costs to keep an estimator from changing its inputs, at 10^6 rows (W 10^6 x 14), measured in one run:
-a read-only view, a copy of W, y and bound, the checksums (:mod:`ident.estimators.isolation`: one pass over the
-inputs in the parent, one in the child), and a whole isolated call of a plugin that returns its prior (fork,
+a read-only view, a copy of W, y and bound, the checksums (:mod:`ident.estimators.door`: one pass over the
+inputs before the call, one after it, both in the child), and a whole isolated call of a plugin that returns its prior (fork,
 checksums, result over a pipe), against the exact hull on the same rows as the reference.
 
     python benchmarks/bench_isolation.py [--rows 1000000] [--repeat 3]
@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from h4bench import ident
-from h4bench.ident.estimators import isolation
+from h4bench.ident.estimators import door, isolation
 
 
 def prior_plugin(W, y, bound, prior):
@@ -50,7 +50,7 @@ def main(argv=None) -> None:
     rows = {
         "read-only views": lambda: [isolation.readonly(a) for a in inputs.values()],
         "copies": lambda: [a.copy() for a in inputs.values()],
-        "checksums (one pass)": lambda: isolation._checksums(inputs),
+        "checksums (one pass)": lambda: door.checksums(inputs),
         "isolated plugin call (fork)": lambda: isolation.call(prior_plugin, W, y, bound, prior),
         "hull (in process)": lambda: isolation.call("hull", W, y, bound, prior),
     }

@@ -310,6 +310,8 @@ def check_estimator(
                                          "(importable from the working directory) or an entry point"),
     seed: int = typer.Option(0, help="seed of the generated problems"),
     as_json: bool = typer.Option(False, "--json", help="print the report as JSON instead of the table"),
+    method_timeout: Optional[float] = typer.Option(None, help="seconds the estimator may run per problem (default: "
+                                                   "no limit); over it, that problem's box check fails: timeout"),
 ) -> None:
     """Check an estimator on generated problems against the exact hull and proven-feasible points
     (h4bench.ident.estimators.check_estimator; docs/estimators.md). Exits 1 naming each failed check (with its
@@ -317,7 +319,11 @@ def check_estimator(
     from h4bench.ident.estimators import check_estimator as run_checks
 
     _importable_from_cwd(name)
-    report = run_checks(name, seed=seed)
+    try:
+        _check_timeout(method_timeout)
+    except ValueError as exc:
+        _fail(str(exc))
+    report = run_checks(name, seed=seed, timeout=method_timeout)
     typer.echo(_json_text(report.to_dict()) if as_json else report.table())
     for r in report.failures:
         proof = f"; proof point {r.proof['point']}" if r.proof else ""

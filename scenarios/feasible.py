@@ -71,12 +71,14 @@ def drawn_methods(spec_methods) -> list[str]:
     return out
 
 
-def reference_sets(W, y, bound, prior, methods, *, boxes: dict | None = None, groups=None) -> tuple[dict, dict, dict]:
+def reference_sets(W, y, bound, prior, methods, *, boxes: dict | None = None, groups=None,
+                   timeout: float | None = None) -> tuple[dict, dict, dict]:
     """Each method's Box (its ``info["set"]`` kept), reusing ``boxes`` already computed.
 
     W (N, p), y (N,), bound (N,) [units of y]; prior a Box; methods names or callables of the registry;
-    groups (N,) the row's joint (passed to the estimators that accept it). Returns ``(boxes, seconds, skipped)``:
-    name -> Box, name -> seconds, name -> why it is not drawn (not registered, failed, proven empty).
+    groups (N,) the row's joint (passed to the estimators that accept it); timeout : seconds per method (None: no
+    limit). A plugin runs in a child process (:func:`ident.estimators.isolation.call`). Returns ``(boxes, seconds,
+    skipped)``: name -> Box, name -> seconds, name -> why it is not drawn (not registered, failed, proven empty).
     """
     out, seconds, skipped = dict(boxes or {}), {}, {}
     for m in methods:
@@ -86,7 +88,7 @@ def reference_sets(W, y, bound, prior, methods, *, boxes: dict | None = None, gr
         t0 = time.perf_counter()
         try:
             ctx = {"groups": groups} if groups is not None else {}
-            out[name] = isolation.call(m, W, y, bound, prior, **ctx)  # a plugin runs in a child process
+            out[name] = isolation.call(m, W, y, bound, prior, timeout=timeout, **ctx)
         except (EstimatorError, InconsistentDataError, ValueError, TypeError, ArithmeticError) as exc:
             skipped[name] = f"{type(exc).__name__}: {exc}"
         seconds[name] = time.perf_counter() - t0

@@ -71,27 +71,33 @@ class ReplayError(ValueError):
 # ------------------------------------------------------------------------------------------------ box history
 
 
-def _default_estimator():
-    from h4bench import ident
+def _contained_estimator(timeout: float | None):
+    """``f(W, y, bound, prior, method=...) -> Box``: :func:`ident.estimators.isolation.call` (a plugin in a child
+    process of its own, a built-in here on read-only views) with the run's time limit per call [s]."""
+    from h4bench.ident.estimators import isolation
 
-    estimate = getattr(ident, "estimate", None)
-    if estimate is None:
-        raise ReplayError("box history needs ident.estimate(W, y, bound, prior, method=...), which is not available")
-    return estimate
+    def estimator(W, y, bound, prior, method="hull"):
+        return isolation.call(method, W, y, bound, prior, timeout=timeout)
+
+    return estimator
 
 
-def box_history(run, methods=("hull", "cgsp"), points: int = 10, estimator=None, progress=None) -> dict:
+def box_history(run, methods=("hull", "cgsp"), points: int = 10, estimator=None, progress=None, *,
+                timeout: float | None = None) -> dict:
     """Each method's box from the first k seconds of data, for ``points`` values of k.
 
     run : a :class:`scenarios.experiment.ExperimentRun`; methods : estimator names for ``ident.estimate``;
     points : number of k values, ``k_j = T j / points`` (j = 1..points, T = ``t[-1] - t[0]`` of the dataset
     [s]), so the last point is the full-data box (taken from ``run.boxes``/``run.failures`` when the method
-    ran, else estimated); estimator : ``f(W, y, bound, prior, method=...) -> Box``, default ``ident.estimate``;
-    progress : optional callable(stage, done, total).
+    ran, else estimated); estimator : ``f(W, y, bound, prior, method=...) -> Box``, default
+    :func:`ident.estimators.isolation.call` with ``timeout`` [s] per call (None: no limit); progress : optional
+    callable(stage, done, total).
 
     The rows kept for k are those whose original sample time satisfies ``t[sample] - t[0] <= k``. A point with
-    fewer rows than parameters, or where the estimator raises a ``ValueError`` (``ident.InconsistentDataError``
-    and ``ident.UnidentifiableError`` are), is skipped: its bounds are NaN, ``ok`` is False and ``message`` says why. Nothing is raised.
+    fewer rows than parameters, or where the estimator raises a ``ValueError`` (``ident.InconsistentDataError``,
+    ``ident.UnidentifiableError`` and ``ident.EstimatorError`` are: a plugin that raised, exited, crashed, changed
+    its inputs or ran past ``timeout`` at that prefix, named), is skipped: its bounds are NaN, ``ok`` is False and
+    ``message`` says why. Nothing is raised.
 
     Returns a dict of plain arrays: ``names`` (p,), ``true`` (p,), ``k`` (K,) [s], ``time`` (K,) = t[0] + k [s],
     ``rows`` (K,) row counts, and ``methods[name]`` with ``lower``/``upper`` (K, p), ``ok`` (K,) bool,
@@ -130,12 +136,12 @@ def box_history(run, methods=("hull", "cgsp"), points: int = 10, estimator=None,
                 res["message"][j] = f"{m} rows < {p} parameters"
             else:
                 if estimator is None:
-                    estimator = _default_estimator()
+                    estimator = _contained_estimator(timeout)
                 sel = np.flatnonzero(row_age <= k[j] + tol) if j < points - 1 else slice(None)
                 t0 = time.perf_counter()
                 try:
                     box = estimator(eq.W[sel], eq.y[sel], eq.bound[sel], run.prior, method=method)
-                except ValueError as exc:  # ident.InconsistentDataError, ident.UnidentifiableError
+                except ValueError as exc:  # ident.InconsistentDataError, UnidentifiableError, EstimatorError
                     res["message"][j] = f"{type(exc).__name__}: {exc}"
                 res["seconds"][j] = time.perf_counter() - t0
             if box is not None:
@@ -414,7 +420,8 @@ def write_replay(run, path, history_points: int = 10, progress=None, *, history:
     progress = progress or (lambda stage, done=0, total=0: None)
     methods = tuple(dict.fromkeys(list(run.boxes) + list(run.failures)))
     if history is None and history_points > 0 and methods:
-        history = box_history(run, methods=methods, points=int(history_points), progress=progress)
+        timeout = (getattr(run, "spec", None) or {}).get("estimators", {}).get("method_timeout")
+        history = box_history(run, methods=methods, points=int(history_points), progress=progress, timeout=timeout)
 
     import rerun as rr
     import rerun.blueprint as rrb

@@ -42,7 +42,8 @@ import numpy as np
 
 from h4bench.ident.box import Box
 from h4bench.ident.errors import EstimatorError, InconsistentDataError
-from h4bench.ident.estimators import registry
+from h4bench.ident.estimators import isolation, registry
+from h4bench.ident.estimators.door import InputsChanged
 from h4bench.ident.estimators.estimate import estimate, min_consistent_bound
 from h4bench.ident.estimators.proof import excluded_point, proven_points
 
@@ -270,6 +271,8 @@ def _check_problem(est, problem: Problem) -> list[CheckResult]:
             out.append(CheckResult("outer", name, FAIL, detail, proof))
     # inputs
     changed = [k for k, arr, copy in before if not np.array_equal(arr, copy)]
+    if isinstance(error, InputsChanged):  # a plugin changed them in its child process (ours are untouched)
+        changed += [f"{k} (in its process)" for k in error.inputs]
     out.append(CheckResult("inputs", name, FAIL if changed else PASS,
                            f"changed {changed}" if changed else "unchanged"))
     out.append(CheckResult("time", name, PASS, f"{seconds:.3g} s (the exact hull: {hull_seconds:.3g} s)",
@@ -277,7 +280,7 @@ def _check_problem(est, problem: Problem) -> list[CheckResult]:
     return out
 
 
-def check_estimator(method, *, seed: int = 0) -> ConformanceReport:
+def check_estimator(method, *, seed: int = 0, timeout: float | None = None) -> ConformanceReport:
     """Run the conformance checks (module docstring) on ``method``.
 
     Parameters
@@ -285,6 +288,9 @@ def check_estimator(method, *, seed: int = 0) -> ConformanceReport:
     method : a registry name, an entry-point name, ``"package.module:attribute"`` or a callable
         ``f(W, y, bound, prior, **context) -> ident.Box``.
     seed : the seed of the generated problems.
+    timeout : seconds per problem (None: no limit); with a limit the estimator runs in a child process (a plugin
+        named by a string always does: :mod:`ident.estimators.door`), killed past it (that problem's ``box``
+        check fails: timeout).
 
     Returns
     -------
@@ -298,6 +304,8 @@ def check_estimator(method, *, seed: int = 0) -> ConformanceReport:
     except (EstimatorError, TypeError) as exc:
         name = method if isinstance(method, str) else getattr(method, "__name__", repr(method))
         return ConformanceReport(str(name), "?", {}, [CheckResult("claims", "-", FAIL, str(exc))])
+    if timeout is not None:
+        est = isolation.contained(est, timeout)
     claims = {"kind": est.kind, "rigorous": est.rigorous, "level": est.level, "context": list(est.context),
               "description": est.description, "citation": est.citation}
     results = [CheckResult("claims", "-", PASS, f"{est.kind}" + (f", level {est.level:g}" if est.level else "")

@@ -15,6 +15,13 @@ is resolved (a built-in name, ``module:attribute``, an entry point, the callable
 same on every path. Without a declared ``context`` the callable's signature decides: its named keyword parameters,
 and :data:`CONTEXT_KEYWORDS` when it takes ``**kwargs``. :func:`call` passes an estimator only the context it takes.
 
+**The door**: a plugin named by a string (an entry point, ``"module:attribute"``) is never imported nor run in this
+process. :func:`get` imports it in a child process (its claims and source hash come back as data) and gives an
+Estimator whose ``func`` is a :class:`~ident.estimators.door.Isolated`: every call of it, by whichever caller,
+runs the plugin in a forked child (:mod:`ident.estimators.door`). The built-ins run in this process; a callable
+passed as the method is the caller's own code (already imported there) and runs where it is called
+(:func:`ident.estimators.isolation.call` contains it too).
+
 Where an estimator comes from (:func:`get`): a built-in name (:data:`BUILTINS`: ``hull``, ``cgsp``, ...), the name of an
 entry point of group :data:`ENTRY_POINT_GROUP` in an installed distribution (``[project.entry-points.
 "h4bench.estimators"] name = "package.module:function"``), a ``"package.module:attribute"`` string, or the callable
@@ -26,21 +33,23 @@ checks the returned box.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.metadata
 import inspect
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, NamedTuple
 
 import numpy as np
 
 from h4bench.ident.box import Box
 from h4bench.ident.errors import EstimatorError
+from h4bench.ident.estimators import door
 from h4bench.ident.estimators.checks import check_problem, real_array
 
 __all__ = ["BUILTINS", "CLAIMS", "CONTEXT_KEYWORDS", "ENTRY_POINT_GROUP", "KINDS", "Available", "Estimator",
-           "available", "call", "claims_table", "declare", "entry_point_names", "get", "register", "takes"]
+           "available", "call", "claims_table", "declare", "entry_point_names", "forget", "get", "register", "takes"]
 
 ENTRY_POINT_GROUP = "h4bench.estimators"
 KINDS = ("guaranteed", "statistical")
@@ -71,7 +80,8 @@ class Estimator:
     context: tuple[str, ...] = ()
 
     def resolve(self) -> Callable:
-        """The callable (imported on first use for a built-in given as ``"module:attribute"``)."""
+        """The callable (imported on first use for a built-in given as ``"module:attribute"``; for a plugin named by
+        a string, the :class:`~ident.estimators.door.Isolated` callable that runs it in a child process)."""
         return _load(self.func, self.name) if isinstance(self.func, str) else self.func
 
 
@@ -269,16 +279,15 @@ def entry_point_names() -> tuple[list[str], list[tuple[str, str]]]:
 
 
 def available() -> Available:
-    """The built-ins and the entry points of group :data:`ENTRY_POINT_GROUP`; those that fail to load, whose
-    name is a built-in's, is given twice or is unusable (:func:`entry_point_names`) are listed in ``broken`` with
-    the reason instead of raising. This loads every entry point in this process:
-    :func:`ident.estimators.isolation.available` loads each in a child process instead."""
+    """The built-ins and the entry points of group :data:`ENTRY_POINT_GROUP`, each entry point loaded in a child
+    process of its own (:func:`get`: its import code never runs here); those that fail to load (raise, exit or
+    crash at import), whose name is a built-in's, is given twice or is unusable (:func:`entry_point_names`) are
+    listed in ``broken`` with the reason instead of raising."""
     found = list(BUILTINS.values())
     usable, broken = entry_point_names()
-    eps = {ep.name: ep for ep in _entry_points() if ep.name in usable}
     for name in usable:
         try:
-            found.append(_from_entry_point(eps[name]))
+            found.append(get(name))
         except EstimatorError as exc:
             broken.append((name, str(exc)))
     return Available(tuple(found), tuple(broken))
@@ -287,6 +296,9 @@ def available() -> Available:
 def get(method) -> Estimator:
     """Resolve ``method``: a built-in name, an entry-point name, ``"package.module:attribute"`` or a callable.
 
+    A built-in or a callable is returned as it is; a plugin named by a string is imported in a child process
+    (remembered per process; :func:`forget`) and returned with ``func`` the
+    :class:`~ident.estimators.door.Isolated` callable that runs it in a child process at every call.
     Raises TypeError for anything else than a string or a callable, EstimatorError (a ValueError) for a name
     that nothing provides or a plugin that cannot be loaded (the message names it and says why).
     """
@@ -300,16 +312,54 @@ def get(method) -> Estimator:
                         f"got {type(method).__name__}")
     if method in BUILTINS:
         return BUILTINS[method]
+    if ":" not in method:
+        usable, problems = entry_point_names()
+        if method in dict(problems):
+            raise EstimatorError(f"estimator {method!r}: {dict(problems)[method]}")
+        if method not in usable:
+            raise EstimatorError(f"method must be one of {tuple(BUILTINS)} (or an entry point of "
+                                 f"{ENTRY_POINT_GROUP!r}, 'package.module:attribute' or a callable), got {method!r}")
+    if method not in _PLUGINS:
+        est, source = door.resolve_in_child(method, _describe_here)
+        _PLUGINS[method] = replace(est, func=door.Isolated(est.name, est.origin, functools.partial(_call_here, method),
+                                                           source=source))
+    return _PLUGINS[method]
+
+
+_PLUGINS: dict[str, Estimator] = {}
+
+
+def forget() -> None:
+    """Forget the plugins resolved in this process (e.g. after a plugin's file changed)."""
+    _PLUGINS.clear()
+
+
+def _get_here(method: str) -> Estimator:
+    """A plugin named by ``method`` imported in *this* process: for a door's child only (:func:`_describe_here`,
+    :func:`_call_here`)."""
     if ":" in method:
         return _from_callable(_load(method, method), method, method)
-    eps = [ep for ep in _entry_points() if ep.name == method]
-    if eps:
-        usable, problems = entry_point_names()
-        if method not in usable:
-            raise EstimatorError(f"estimator {method!r}: {dict(problems)[method]}")
-        return _from_entry_point(eps[0])
-    raise EstimatorError(f"method must be one of {tuple(BUILTINS)} (or an entry point of {ENTRY_POINT_GROUP!r}, "
-                         f"'package.module:attribute' or a callable), got {method!r}")
+    return _from_entry_point(next(ep for ep in _entry_points() if ep.name == method))
+
+
+def _describe_here(method: str) -> tuple[Estimator, dict]:
+    """In a door's child: the plugin's Estimator (``func`` the method string) and the provenance of its code
+    (``{"module", "sha256"}``, for an entry point also ``"distribution"`` and ``"version"``)."""
+    est = _get_here(method)
+    if ":" in method:
+        source = door.module_source(method.partition(":")[0])
+    else:
+        ep = next(ep for ep in _entry_points() if ep.name == method)
+        source = {**door.module_source(ep.value.partition(":")[0]), "distribution": getattr(ep.dist, "name", None),
+                  "version": getattr(ep.dist, "version", None)}
+    return replace(est, func=method), source
+
+
+def _call_here(method: str, W, y, b, prior, **context) -> Box:
+    """In a door's child: run the plugin named by ``method`` on checked inputs and check its box (so that only plain
+    data comes back)."""
+    est = _get_here(method)
+    return _check_result(est, est.resolve()(W, y, b, prior, **context), W.shape[1], prior.names)
 
 
 def _check_context(context: dict, n: int, p: int) -> dict:
@@ -387,6 +437,9 @@ def call(est, W, y, bound, prior, **context) -> Box:
     ``instruments``, a built-in's ``check_consistency``, ...; ``groups`` and ``instruments`` are checked.
     Returns the Box (an estimator may also return a ``(lower, upper)`` pair: it becomes a Box with the prior's
     names); EstimatorError naming the estimator if it is not a box of the prior's shape, finite, with lower <= upper.
+    A plugin named by a string runs in a child process (:func:`get` gives it as an
+    :class:`~ident.estimators.door.Isolated`): what it raised, an exit, a crash or a change of its inputs comes back
+    as an EstimatorError naming it.
     """
     est = get(est)
     func = est.resolve()

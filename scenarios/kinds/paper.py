@@ -72,7 +72,8 @@ def feasible_set(run_, out: Path) -> dict:
     t0 = time.perf_counter()
     methods = cfg["methods"] or drawn_methods(run_.spec["estimators"]["methods"])
     sets, seconds, skipped = reference_sets(eq.W, eq.y, eq.bound, run_.prior, methods, boxes=run_.boxes,
-                                            groups=np.asarray(eq.joint, dtype=np.int64))
+                                            groups=np.asarray(eq.joint, dtype=np.int64),
+                                            timeout=run_.spec["estimators"].get("method_timeout"))
     sets = {m: sets[m] for m in methods if m in sets}
     kinds = {m: isolation.resolve(m).estimator.kind for m in sets}
     from h4bench.ident import parameter_units

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import textwrap
 from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
 
 PLUGIN = '''\
-import os, sys, time
+import os, signal, sys, time
 import numpy as np
 from h4bench import ident
 
@@ -66,6 +69,20 @@ def raiser(W, y, bound, prior):
     raise RuntimeError("plugin bug")
 
 
+def change_bound(W, y, bound, prior):
+    _root(bound)[...] *= 10.0
+    return prior
+
+
+def change_prior(W, y, bound, prior):
+    _root(prior.lower)[...] = -1e9
+    return prior
+
+
+def crasher(W, y, bound, prior):
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
 def sleeper(W, y, bound, prior):
     time.sleep(120)
     return prior
@@ -78,12 +95,33 @@ def shrunk(W, y, bound, prior):
 
 EXIT_AT_IMPORT = "import os\nos._exit(3)\n"
 
+#: each failing plugin of PLUGIN and the words its failure message holds (besides its name)
+FAILURES = {"soft_exit": "sys.exit(5)", "hard_exit": "os._exit(7)", "crasher": "SIGSEGV", "raiser": "plugin bug",
+            "add_y": "changed its inputs in place (y)", "scale_w": "changed its inputs in place (W)",
+            "change_bound": "changed its inputs in place (bound)",
+            "change_prior": "changed its inputs in place (prior.lower)", "sleeper": "timeout"}
+
 
 def write_plugin(folder: Path, name: str = "trustcases") -> Path:
     """``<folder>/<name>.py``: the plugins above; returns the file."""
     path = Path(folder) / f"{name}.py"
     path.write_text(PLUGIN)
     return path
+
+
+class _Rows(SimpleNamespace):
+    def __len__(self) -> int:
+        return len(self.y)
+
+
+def prefix_run(W, y, bound, prior, per_sample: int = 4):
+    """What :func:`scenarios.replay.box_history` reads of an ExperimentRun, for the rows W (N, p), y (N,), bound (N,)
+    (``per_sample`` rows per sample, one sample every 0.1 s) and a prior Box: no method ran yet (every point of the
+    history is estimated), truth the prior's midpoint."""
+    n = len(y) // per_sample
+    eq = _Rows(W=W, y=y, bound=bound, sample=np.repeat(np.arange(n), per_sample), names=prior.names)
+    return SimpleNamespace(equation=eq, dataset=SimpleNamespace(t=0.1 * np.arange(n)), prior=prior, boxes={},
+                           failures={}, spec={}, theta_true=0.5 * (np.asarray(prior.lower) + np.asarray(prior.upper)))
 
 
 def fake_distribution(site: Path, dist: str, entries: dict[str, str], modules: dict[str, str] = {}) -> None:
