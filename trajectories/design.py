@@ -20,6 +20,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from h4bench import sim
+from h4bench.portable import det4, jacobi_svd, solve4
 
 #: The optimiser's Coulomb columns use tanh(qd / SIGN_WIDTH) for sign(qd) [rad/s]: sign has no derivative
 #: (a finite-difference step across qd = 0 would jump); samples that slow are excluded or given an interval
@@ -27,12 +28,24 @@ from h4bench import sim
 SIGN_WIDTH = 0.05
 #: Forward-difference steps on x, xd, xdd (or q, qd, qdd) per sample.
 FD_STEP = np.repeat([1e-7, 1e-6, 1e-5], 4)
+#: The optimiser's iterates are evaluated on a fixed grid: SLSQP's own steps (scipy's BLAS and LAPACK inside it)
+#: differ in their last bits from one CPU kernel or thread count to another, so the criterion, the constraints
+#: and their gradients are computed at z rounded to a multiple of SNAP (2^-24, about 6e-8 of the O(1) scaled
+#: coefficients; exact in binary) and the result is rounded too. Two machines then evaluate the same points, and
+#: hence take the same path, unless a last-bit difference straddles a grid boundary (odds about 1e-14 / 6e-8 per
+#: coordinate and step). Everything computed at a point is itself BLAS-free (:mod:`h4bench.portable`).
+SNAP = 2.0 ** -24
 CONSTRAINT_NAMES = tuple(f"{c}:{i}" for c, n in (("x_upper", 4), ("x_lower", 4), ("q_upper", 4), ("q_lower", 4),
                                                  ("reach", 4), ("cond_jx", 1), ("qd", 4), ("qdd", 4), ("tau", 4))
                          for i in range(n))
 # per-sample outputs y: columns of the (N, 29) array
 _X, _Q, _QD, _QDD, _RATIO, _MNAC, _IBC, _CONDJX = (slice(0, 4), slice(4, 8), slice(8, 12), slice(12, 16),
                                                     slice(16, 20), slice(20, 24), slice(24, 28), slice(28, 29))
+
+
+def snap(z) -> np.ndarray:
+    """z (nz,) rounded to the nearest multiple of :data:`SNAP` (exact: a power-of-two scaling and a rounding)."""
+    return np.round(np.asarray(z, float) / SNAP) * SNAP
 
 
 def _cross(a, b):
@@ -81,9 +94,9 @@ def fast_motion(geometry, x, xd, xdd) -> dict:
         rhs = np.zeros(x.shape[:1] + (4, 2))
         rhs[:, :3, 0] = xdd[:, :3] - g.gravity[None]
         rhs[:, 3, 1] = xdd[:, 3]
-        ok = np.all(np.isfinite(jx), axis=(1, 2)) & (np.abs(np.linalg.det(jx)) > 1e-12)
+        ok = np.all(np.isfinite(jx), axis=(1, 2)) & (np.abs(det4(jx)) > 1e-12)
         y = np.full_like(rhs, np.nan)
-        y[ok] = np.linalg.solve(np.swapaxes(jx[ok], 1, 2), rhs[ok])
+        y[ok] = solve4(np.swapaxes(jx[ok], 1, 2), rhs[ok])
         jtv = jq[..., None] * y
     return {"q": q, "qd": qd, "qdd": qdd, "ratio": np.abs(ratio), "Jx": jx, "mnac": jtv[..., 0],
             "ibc": jtv[..., 1]}
@@ -143,7 +156,7 @@ class CoefficientProblem:
 
     def inputs(self, z) -> np.ndarray:
         """u (n, 12) = (pos, vel, acc) in the design space."""
-        return self.u0[None] + self.B @ np.asarray(z, float)
+        return self.u0[None] + np.einsum("nkz,z->nk", self.B, np.asarray(z, float))
 
     def outputs(self, U, cond_jx=True) -> np.ndarray:
         """y (N, 29) per sample: x, q, qd, qdd, reach ratio, Mnac column, Ibc column, cond(Jx) (NaN unless
@@ -158,9 +171,9 @@ class CoefficientProblem:
         cond = np.full((x.shape[0], 1), np.nan)
         if cond_jx:
             jx = np.where(np.isfinite(m["Jx"]), m["Jx"], 0.0)
-            ev = np.linalg.eigvalsh(np.matmul(np.swapaxes(jx, 1, 2), jx))  # squared singular values, ascending
+            sv = jacobi_svd(jx)  # descending
             with np.errstate(invalid="ignore", divide="ignore"):
-                cond[:, 0] = np.sqrt(ev[:, -1] / ev[:, 0])
+                cond[:, 0] = sv[:, 0] / sv[:, -1]
         return np.concatenate([x, m["q"], m["qd"], m["qdd"], m["ratio"], m["mnac"], m["ibc"], cond], axis=1)
 
     def _regressor_times(self, y, v):
@@ -234,7 +247,7 @@ class CoefficientProblem:
             dy_du = (Y[1:] - y[None]) / FD_STEP[:, None, None]  # (12, n, 29)
             if not np.all(np.isfinite(dy_du)):
                 return self._failed(gradient)
-            dy = np.matmul(dy_du.transpose(1, 2, 0), self.B)  # (n, 29, nz)
+            dy = np.einsum("kny,nkz->nyz", dy_du, self.B)  # (n, 29, nz)
         objective = self.objective(y, dy)
         if objective is None:
             return self._failed(gradient)
@@ -250,7 +263,8 @@ class CoefficientProblem:
         (value, gradient (nz,) or None), or None when the design is degenerate. Here log cond(W diag(theta));
         subclasses override it (:class:`trajectories.bounded.HalfwidthProblem`)."""
         Ws = self._scaled_regressor(y)
-        lam, vec = np.linalg.eigh(Ws.T @ Ws)
+        sv, vec = jacobi_svd(Ws, vectors=True)  # descending; Ws^T Ws = V diag(sv^2) V^T
+        lam, vec = sv[::-1] ** 2, vec[:, ::-1]  # ascending, as eigh's
         if lam[0] <= 0:
             return None
         log_cond = 0.5 * np.log(lam[-1] / lam[0])
@@ -297,6 +311,7 @@ class CoefficientProblem:
         return lo
 
     def _memo(self, z):
+        z = snap(z)  # the same points on every machine (SNAP)
         if self._cache is None or not np.array_equal(self._cache[0], z):
             log_cond, cons, grad, dcons = self.evaluate(z, gradient=True)
             if not np.isfinite(log_cond):  # steer SLSQP back: a large objective, constraints violated
@@ -305,9 +320,13 @@ class CoefficientProblem:
         return self._cache[1:]
 
     def optimise(self, z0, max_iter: int):
-        """SLSQP from z0: minimise the criterion subject to every constraint value <= 0 (scipy: -cons >= 0)."""
+        """SLSQP from z0: minimise the criterion subject to every constraint value <= 0 (scipy: -cons >= 0);
+        the criterion, constraints and gradients are evaluated at :func:`snap` (z), and the result's ``x`` is
+        snapped too."""
         self._cache = None
-        return minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
+        res = minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
                         options={"maxiter": max_iter, "ftol": 1e-4},
                         constraints=[{"type": "ineq", "fun": lambda z: -self._memo(z)[2],
                                       "jac": lambda z: -self._memo(z)[3]}])
+        res.x = snap(res.x)
+        return res
