@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from h4bench import ident, portable
+from h4bench.fingerprint import array_digest
 from h4bench import sim
 from h4bench.trajectories.bounded import as_targets
 from h4bench.trajectories.checks import check_trajectory
@@ -115,13 +116,8 @@ def cache_key(inputs: dict) -> str:
 
 def content_hash(traj: Trajectory) -> str:
     """SHA-256 of a trajectory's arrays (dtype, shape, bytes) and of its check report (JSON)."""
-    h = hashlib.sha256()
-    for name in ("t", "x", "q", "qd", "qdd"):
-        arr = np.ascontiguousarray(getattr(traj, name))
-        h.update(f"{name}:{arr.dtype.str}:{arr.shape}".encode())
-        h.update(arr.tobytes())
-    h.update(json.dumps(traj.checks, sort_keys=True, default=str).encode())
-    return h.hexdigest()
+    return array_digest([(name, getattr(traj, name)) for name in ("t", "x", "q", "qd", "qdd")],
+                        json.dumps(traj.checks, sort_keys=True, default=str).encode())
 
 
 def _load_valid(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Trajectory | None:
