@@ -11,11 +11,12 @@ variables of the environment).
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 from pathlib import Path
 
-__all__ = ["blas_info", "blas_threads", "openblas_libraries"]
+__all__ = ["blas_info", "blas_threads", "one_blas_thread", "openblas_libraries"]
 
 _SETTERS = ("openblas_set_num_threads", "openblas_set_num_threads64_", "scipy_openblas_set_num_threads64_",
             "scipy_openblas_set_num_threads")
@@ -82,3 +83,23 @@ def blas_info() -> list:
             pass
         out.append({"library": Path(path).name, "kernel": kernel, "threads": int(getter())})
     return out or [{"library": "unknown", "kernel": None, "threads": blas_threads()[0][1]}]
+
+
+@contextlib.contextmanager
+def one_blas_thread():
+    """Within the block, every OpenBLAS loaded (numpy's and scipy's, both loaded first) runs one thread; the
+    counts it found are restored after it. For a step whose library code calls BLAS on a path we do not control
+    (scipy's SLSQP): a threaded product splits its sums by thread, so one thread removes the thread count from
+    the result (the kernel's own order remains)."""
+    import numpy  # noqa: F401, PLC0415  (their BLAS loaded now, so that all are set)
+    import scipy.linalg  # noqa: F401, PLC0415
+
+    libs = openblas_libraries()
+    saved = [(setter, int(getter())) for _, setter, getter in libs]
+    for setter, _ in saved:
+        setter(1)
+    try:
+        yield
+    finally:
+        for setter, n in saved:
+            setter(n)

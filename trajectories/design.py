@@ -20,6 +20,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from h4bench import sim
+from h4bench.blas import one_blas_thread
 from h4bench.portable import det4, jacobi_svd, solve4
 
 #: The optimiser's Coulomb columns use tanh(qd / SIGN_WIDTH) for sign(qd) [rad/s]: sign has no derivative
@@ -324,9 +325,10 @@ class CoefficientProblem:
         the criterion, constraints and gradients are evaluated at :func:`snap` (z), and the result's ``x`` is
         snapped too."""
         self._cache = None
-        res = minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
-                        options={"maxiter": max_iter, "ftol": 1e-4},
-                        constraints=[{"type": "ineq", "fun": lambda z: -self._memo(z)[2],
-                                      "jac": lambda z: -self._memo(z)[3]}])
+        with one_blas_thread():  # SLSQP's own BLAS calls: no thread-count dependence (h4bench.blas)
+            res = minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
+                           options={"maxiter": max_iter, "ftol": 1e-4},
+                           constraints=[{"type": "ineq", "fun": lambda z: -self._memo(z)[2],
+                                         "jac": lambda z: -self._memo(z)[3]}])
         res.x = snap(res.x)
         return res
