@@ -10,20 +10,26 @@ and ``np.einsum`` without ``optimize`` (numpy's own loops, never BLAS), in an or
 - :func:`matmul`: ``A @ B`` over the last two axes (batched);
 - :func:`det4`, :func:`solve4`: determinant and solution of 4 x 4 systems by cofactors (batched);
 - :func:`jacobi_svd`: singular values (and right singular vectors) by one-sided Jacobi rotations (batched),
-  :func:`cond`: the 2-norm condition number from them.
+  :func:`cond`: the 2-norm condition number from them, :func:`lstsq`: the minimum-norm least-squares solution
+  with a relative cut-off (``np.linalg.lstsq``'s ``rcond``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cond", "det4", "jacobi_svd", "matmul", "solve4"]
+__all__ = ["cond", "det4", "jacobi_svd", "lstsq", "matmul", "solve4"]
 
 
 def matmul(a, b) -> np.ndarray:
-    """``a @ b`` (..., m, k) x (..., k, n) -> (..., m, n), or a vector second operand (..., k) -> (..., m),
-    by ``np.einsum`` (no BLAS: the same bits on any CPU)."""
+    """``a @ b`` (..., m, k) x (..., k, n) -> (..., m, n), with ``@``'s rules for a vector operand ((k,) on the
+    left or the right), by ``np.einsum`` (no BLAS: the same bits on any CPU; each sum in the order of k, so
+    the usual ``gamma_k |a| |b|`` bound of its rounding error holds)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.ndim == 1 and b.ndim == 1:
+        return np.einsum("j,j->", a, b)
+    if a.ndim == 1:
+        return np.einsum("j,...jk->...k", a, b)
     if b.ndim == 1:
         return np.einsum("...ij,j->...i", a, b)
     return np.einsum("...ij,...jk->...ik", a, b)
@@ -103,7 +109,8 @@ def jacobi_svd(a, vectors: bool = False):
                 rotated = True
                 g = np.where(rot, gamma, 1.0)
                 zeta = (beta - alpha) / (2.0 * g)
-                t = np.where(zeta >= 0, 1.0, -1.0) / (np.abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+                with np.errstate(over="ignore"):  # |zeta| > 1e154: t = 0 (its limit, ~1/(2 |zeta|), is below 1e-154)
+                    t = np.where(zeta >= 0, 1.0, -1.0) / (np.abs(zeta) + np.sqrt(1.0 + zeta * zeta))
                 cs = np.where(rot, 1.0 / np.sqrt(1.0 + t * t), 1.0)
                 sn = np.where(rot, cs * t, 0.0)
                 cs, sn = cs[..., None], sn[..., None]
@@ -127,3 +134,14 @@ def cond(a) -> np.ndarray:
     s = jacobi_svd(a)
     with np.errstate(divide="ignore", invalid="ignore"):
         return s[..., 0] / s[..., -1]
+
+
+def lstsq(a, b, rcond: float = 1e-12) -> np.ndarray:
+    """The minimum-norm least-squares solution x (n,) of ``a x ~ b`` for a (m, n), m >= n, b (m,): singular
+    values below ``rcond`` times the largest are dropped (as ``np.linalg.lstsq(a, b, rcond)[0]``), from
+    :func:`jacobi_svd`: ``x = V diag(1/s) U^T b`` with ``U = a V diag(1/s)``. Same bits on any CPU."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    s, v = jacobi_svd(a, vectors=True)
+    keep = s > rcond * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, dtype=bool)
+    u = matmul(a, v[:, keep]) / s[keep]
+    return matmul(v[:, keep], matmul(b, u) / s[keep])
