@@ -87,13 +87,10 @@ def blas_info() -> list:
 
 @contextlib.contextmanager
 def one_blas_thread():
-    """Within the block, every OpenBLAS loaded (numpy's and scipy's, both loaded first) runs one thread; the
-    counts it found are restored after it. For a step whose library code calls BLAS on a path we do not control
-    (scipy's SLSQP): a threaded product splits its sums by thread, so one thread removes the thread count from
-    the result (the kernel's own order remains)."""
-    import numpy  # noqa: F401, PLC0415  (their BLAS loaded now, so that all are set)
-    import scipy.linalg  # noqa: F401, PLC0415
-
+    """Within the block, every OpenBLAS loaded now (load the libraries whose calls matter first, e.g. by
+    importing scipy.optimize) runs one thread; the counts it found are restored after it. For a step whose
+    library code calls BLAS on a path we do not control (scipy's SLSQP): a threaded product splits its sums by
+    thread, so one thread removes the thread count from the result (the kernel's own order remains)."""
     libs = openblas_libraries()
     saved = [(setter, int(getter())) for _, setter, getter in libs]
     for setter, _ in saved:
