@@ -8,8 +8,9 @@ reference inputs ``u = (x, xd, xdd)`` (12 numbers; (q, qd, qdd) in joint space) 
 gradient needs only the 12 partial derivatives dy/du per sample (forward differences, one batched call on 13 n
 samples) and the chain rule ``dy/dz = dy/du B``: 13 evaluations per sample instead of 2 H 4 + 1 = 41.
 
-Objective: ``log cond(W diag(theta))`` (eigenvalues of the 14 x 14 Gram matrix; its gradient from the extreme
-eigenvectors v: ``d lambda = 2 (W v) . (dW v)``), with tanh(qd / SIGN_WIDTH) for sign(qd) in the Coulomb columns.
+Objective: ``log cond(W diag(theta))`` (singular values by one-sided Jacobi rotations,
+:func:`h4bench.portable.jacobi_svd`; its gradient from the extreme right singular vectors v, the eigenvectors of
+the Gram matrix: ``d lambda = 2 (W v) . (dW v)``), with tanh(qd / SIGN_WIDTH) for sign(qd) in the Coulomb columns.
 Constraints: for each limit and joint/axis, the largest normalised violation over the grid (<= 0 satisfied;
 gradient at the worst sample); SLSQP.
 """
@@ -29,12 +30,14 @@ from h4bench.portable import det4, jacobi_svd, solve4
 SIGN_WIDTH = 0.05
 #: Forward-difference steps on x, xd, xdd (or q, qd, qdd) per sample.
 FD_STEP = np.repeat([1e-7, 1e-6, 1e-5], 4)
-#: The optimiser's iterates are evaluated on a fixed grid: SLSQP's own steps (scipy's BLAS and LAPACK inside it)
-#: differ in their last bits from one CPU kernel or thread count to another, so the criterion, the constraints
-#: and their gradients are computed at z rounded to a multiple of SNAP (2^-24, about 6e-8 of the O(1) scaled
+#: The optimiser's iterates are evaluated on a fixed grid: SLSQP's own steps (scipy's BLAS and LAPACK inside it,
+#: run on one thread, :func:`h4bench.blas.one_blas_thread`: its threaded products split their sums by thread)
+#: may differ in their last bits from one CPU kernel to another, so the criterion, the constraints and their
+#: gradients are computed at z rounded to a multiple of SNAP (2^-24, about 6e-8 of the O(1) scaled
 #: coefficients; exact in binary) and the result is rounded too. Two machines then evaluate the same points, and
-#: hence take the same path, unless a last-bit difference straddles a grid boundary (odds about 1e-14 / 6e-8 per
-#: coordinate and step). Everything computed at a point is itself BLAS-free (:mod:`h4bench.portable`).
+#: hence take the same path, unless a difference inside SLSQP grows to a grid step or straddles a grid boundary
+#: (measured: none over the seeds of ``benchmarks/blas_matrix.py``). Everything computed at a point is itself
+#: BLAS-free (:mod:`h4bench.portable`).
 SNAP = 2.0 ** -24
 CONSTRAINT_NAMES = tuple(f"{c}:{i}" for c, n in (("x_upper", 4), ("x_lower", 4), ("q_upper", 4), ("q_lower", 4),
                                                  ("reach", 4), ("cond_jx", 1), ("qd", 4), ("qdd", 4), ("tau", 4))

@@ -9,8 +9,8 @@ settings, targets, nominal parameters, the remaining design options, the source 
 (:data:`CODE_FILES` and :mod:`h4bench.portable`, so an edit invalidates old entries) and the versions of numpy
 and scipy. Not the BLAS kernel nor its thread count: the design's result does not depend on them (its
 criterion, constraints and gradients are computed without BLAS and its iterates on a fixed grid,
-:mod:`trajectories.design`), so an entry designed on one machine is the one any other would design. Files are written atomically (temp file +
-``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
+:mod:`trajectories.design`), so an entry designed on one machine is the one any other would design. Files are
+written atomically (temp file + ``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
 and inputs, and either holds exactly the arrays that passed :func:`trajectories.check_trajectory` when it was
 designed (their SHA-256 and the check report's, stored with the entry, :func:`content_hash`: the key already
 covers the geometry, limits, nominal parameters and the checks' code, so the check would repeat itself) or, for
