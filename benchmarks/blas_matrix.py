@@ -2,14 +2,14 @@
 fresh process with ``OPENBLAS_CORETYPE`` and ``OPENBLAS_NUM_THREADS`` set, side by side.
 
     python benchmarks/blas_matrix.py [--seeds 0 7] [--duration 4] [--max-iter N] [--paper]
-                                     [--kernels Haswell SandyBridge] [--threads 1 2] [--json]
+                                     [--kernels Haswell SandyBridge] [--threads 1 2] [--processes 4] [--json]
 
 Per seed and setting: the content hash (:func:`trajectories.excitation.content_hash`, first 8 hex digits) and
 the h criterion (``max_relative`` of :func:`trajectories.design_criterion`) of the paper's design
 (``trajectories.design_excitation`` with the spec's limits, processing, harmonics and fundamental, ``cache=False``)
-of ``--duration`` seconds; with ``--paper``, ``h4bench run paper --quick --seed S`` in a fresh design cache: its
-``content_hashes`` (trajectory, controller, feed-forward, dataset) and the hull box (Imot1 lower bound and a
-hash of every bound). A kernel the CPU cannot run (e.g. SkylakeX without AVX-512) ends its process with
+of ``--duration`` seconds; with ``--paper`` instead, ``h4bench run paper --quick --seed S`` in a fresh design
+cache (so it designs its 4 s trajectory itself): its ``content_hashes`` (trajectory, controller, feed-forward,
+dataset) and the hull box (Imot1 lower bound and a hash of every bound). ``--processes`` settings run at once. A kernel the CPU cannot run (e.g. SkylakeX without AVX-512) ends its process with
 SIGILL: check ``architecture`` in threadpoolctl's report, or the ``platform`` entry of a result.json. One value
 per column means the setting does not matter.
 """
@@ -23,6 +23,7 @@ import os
 import subprocess
 import sys
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,24 +93,28 @@ def main() -> None:
     parser.add_argument("--paper", action="store_true", help="also run h4bench run paper --quick per setting")
     parser.add_argument("--kernels", nargs="+", default=["Haswell", "SandyBridge"])
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--processes", type=int, default=4, help="settings run at once (default 4)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    settings = [(k, t) for k in args.kernels for t in args.threads]
-    rows = []
-    for seed in args.seeds:
-        for kernel, threads in settings:
-            row = {"seed": seed, "kernel": kernel, "threads": threads,
-                   "design": design(seed, args.duration, args.max_iter, kernel, threads)}
-            if args.paper:
-                row["paper"] = paper(seed, kernel, threads)
-            rows.append(row)
-            d = row["design"]
+    jobs = [(seed, k, t) for seed in args.seeds for k in args.kernels for t in args.threads]
+
+    def one(job):
+        seed, kernel, threads = job
+        row = {"seed": seed, "kernel": kernel, "threads": threads}
+        if args.paper:  # the paper run designs its own trajectory in a fresh cache: its hash is the design's
+            row["paper"] = p = paper(seed, kernel, threads)
+            row["design"] = {"hash": p["trajectory"]}
+            line = (f"seed {seed} {kernel:>11}/{threads}: trajectory {p['trajectory'][:8]} controller "
+                    f"{p['controller'][:8]} feed-forward {str(p['feedforward'])[:8]} dataset {p['dataset'][:8]} "
+                    f"Imot1 lower {p['imot1_lower']!r} box {p['box'][:8]}")
+        else:
+            row["design"] = d = design(seed, args.duration, args.max_iter, kernel, threads)
             line = f"seed {seed} {kernel:>11}/{threads}: design {d['hash'][:8]} h {d['h']:.6f}"
-            if args.paper:
-                p = row["paper"]
-                line += (f" | paper trajectory {p.get('trajectory', '?')[:8]} controller {p.get('controller', '?')[:8]}"
-                         f" dataset {p.get('dataset', '?')[:8]} Imot1 lower {p['imot1_lower']:.7f} box {p['box'][:8]}")
-            print(line, file=sys.stderr, flush=True)
+        print(line, file=sys.stderr, flush=True)
+        return row
+
+    with ThreadPoolExecutor(max_workers=max(1, args.processes)) as pool:
+        rows = list(pool.map(one, jobs))
     for seed in args.seeds:
         mine = [r for r in rows if r["seed"] == seed]
         designs = {r["design"]["hash"] for r in mine}
