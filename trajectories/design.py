@@ -17,8 +17,16 @@ gradient at the worst sample); SLSQP.
 
 from __future__ import annotations
 
+import os
+import pickle
+import platform
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import OptimizeResult, minimize
 
 from h4bench import sim
 from h4bench.blas import one_blas_thread
@@ -323,10 +331,18 @@ class CoefficientProblem:
             self._cache = (np.array(z, copy=True), log_cond, grad, cons, dcons)
         return self._cache[1:]
 
-    def optimise(self, z0, max_iter: int):
-        """SLSQP from z0: minimise the criterion subject to every constraint value <= 0 (scipy: -cons >= 0);
-        the criterion, constraints and gradients are evaluated at :func:`snap` (z), and the result's ``x`` is
-        snapped too."""
+    def __getstate__(self) -> dict:
+        """Pickled without the evaluation memo and the LP warm start (HiGHS bases): for :meth:`optimise`'s
+        process, which starts both afresh."""
+        state = dict(self.__dict__)
+        state["_cache"] = None
+        for key in ("last", "_last_keep"):
+            if key in state:
+                state[key] = None
+        return state
+
+    def _slsqp(self, z0, max_iter: int):
+        """SLSQP from z0 in this process (see :meth:`optimise`)."""
         self._cache = None
         with one_blas_thread():  # SLSQP's own BLAS calls: no thread-count dependence (h4bench.blas)
             res = minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
@@ -335,3 +351,44 @@ class CoefficientProblem:
                                          "jac": lambda z: -self._memo(z)[3]}])
         res.x = snap(res.x)
         return res
+
+    def optimise(self, z0, max_iter: int):
+        """SLSQP from z0: minimise the criterion subject to every constraint value <= 0 (scipy: -cons >= 0);
+        the criterion, constraints and gradients are evaluated at :func:`snap` (z), and the result's ``x`` is
+        snapped too. Returns scipy's OptimizeResult (``x``, ``nit``, ``nfev``, ``message``).
+
+        SLSQP's own steps call scipy's BLAS and LAPACK, whose kernel OpenBLAS picks by CPU: on x86-64 the
+        optimisation runs in a child process whose OpenBLAS is forced to one kernel and one thread
+        (:data:`SLSQP_ENVIRONMENT`), so that every machine takes the same steps (elsewhere, or with
+        ``H4BENCH_SLSQP_IN_PROCESS=1``, in this process on its own kernel, one thread)."""
+        if platform.machine().lower() not in ("x86_64", "amd64") or os.environ.get("H4BENCH_SLSQP_IN_PROCESS") == "1":
+            return self._slsqp(z0, max_iter)
+        with tempfile.TemporaryDirectory(prefix="h4bench-slsqp-") as tmp:
+            task, answer = Path(tmp) / "task.pkl", Path(tmp) / "result.pkl"
+            task.write_bytes(pickle.dumps((self, np.asarray(z0, float), int(max_iter))))
+            env = dict(os.environ, **SLSQP_ENVIRONMENT)
+            done = subprocess.run([sys.executable, "-c", _CHILD, str(task), str(answer)], env=env,
+                                  capture_output=True, text=True)
+            if done.returncode != 0:
+                raise RuntimeError(f"the design's optimiser process failed ({done.returncode}): "
+                                   f"{done.stderr.strip()[-2000:]}")
+            x, nit, nfev, message = pickle.loads(answer.read_bytes())
+        self._cache = None
+        return OptimizeResult(x=x, nit=nit, nfev=nfev, message=message)
+
+
+#: The environment of :meth:`CoefficientProblem.optimise`'s process: OpenBLAS's Nehalem kernel (SSE4.2, which
+#: numpy 2 already requires of an x86-64 CPU) and one thread, whatever the CPU and the caller's environment.
+SLSQP_ENVIRONMENT = {"OPENBLAS_CORETYPE": "Nehalem", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+                     "OPENBLAS_L2_SIZE": "262144", "H4BENCH_SLSQP_IN_PROCESS": "1"}
+_CHILD = ("import pickle, sys\n"
+          "from h4bench.trajectories.design import optimise_task\n"
+          "optimise_task(sys.argv[1], sys.argv[2])\n")
+
+
+def optimise_task(task: str, answer: str) -> None:
+    """The body of :meth:`CoefficientProblem.optimise`'s process: unpickle (problem, z0, max_iter) from the file
+    ``task``, run SLSQP, pickle (x, nit, nfev, message) into the file ``answer``."""
+    prob, z0, max_iter = pickle.loads(Path(task).read_bytes())
+    res = prob._slsqp(z0, max_iter)
+    Path(answer).write_bytes(pickle.dumps((np.asarray(res.x, float), int(res.nit), int(res.nfev), str(res.message))))
