@@ -38,14 +38,13 @@ from h4bench.portable import det4, jacobi_svd, solve4
 SIGN_WIDTH = 0.05
 #: Forward-difference steps on x, xd, xdd (or q, qd, qdd) per sample.
 FD_STEP = np.repeat([1e-7, 1e-6, 1e-5], 4)
-#: The optimiser's iterates are evaluated on a fixed grid: SLSQP's own steps (scipy's BLAS and LAPACK inside it,
-#: run on one thread, :func:`h4bench.blas.one_blas_thread`: its threaded products split their sums by thread)
-#: may differ in their last bits from one CPU kernel to another, so the criterion, the constraints and their
-#: gradients are computed at z rounded to a multiple of SNAP (2^-24, about 6e-8 of the O(1) scaled
-#: coefficients; exact in binary) and the result is rounded too. Two machines then evaluate the same points, and
-#: hence take the same path, unless a difference inside SLSQP grows to a grid step or straddles a grid boundary
-#: (measured: none over the seeds of ``benchmarks/blas_matrix.py``). Everything computed at a point is itself
-#: BLAS-free (:mod:`h4bench.portable`).
+#: The optimiser's iterates are evaluated on a fixed grid: the criterion, the constraints and their gradients
+#: are computed at z rounded to a multiple of SNAP (2^-24, about 6e-8 of the O(1) scaled coefficients; exact in
+#: binary) and the result is rounded too, so that a last-bit difference of SLSQP's own steps changes nothing
+#: unless it straddles a grid boundary. Those steps call scipy's BLAS and LAPACK, so they run on one OpenBLAS
+#: kernel and one thread wherever that can be forced (:meth:`CoefficientProblem.optimise`): measured, a design
+#: on one thread still differed between the Haswell and SandyBridge kernels (seed 7, 4 s) before that. Everything
+#: computed at a point is itself BLAS-free (:mod:`h4bench.portable`).
 SNAP = 2.0 ** -24
 CONSTRAINT_NAMES = tuple(f"{c}:{i}" for c, n in (("x_upper", 4), ("x_lower", 4), ("q_upper", 4), ("q_lower", 4),
                                                  ("reach", 4), ("cond_jx", 1), ("qd", 4), ("qdd", 4), ("tau", 4))
