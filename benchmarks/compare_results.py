@@ -9,11 +9,9 @@ bit outside the keys that are timings, paths or code hashes.
 Keep DIR outside the repository; run it on the base commit first, then on the change.
 
 ``compare`` loads ``NAME/result.json`` of both folders (and with ``--runs`` a campaign's ``runs/*.json`` too) and
-compares them as parsed JSON: floats with ``==`` (bit for bit, NaN written as null on both sides), lists
-element by element, dicts key by key. Ignored wherever they appear: the keys in :data:`IGNORED` (timings,
-throughput, provenance hashes, paths) and every key ending in ``seconds``; the model path (:data:`CHECKOUT_PATHS`) is
-compared inside its checkout (``models/h4.xml``). Prints every difference (a JSON path, before, after)
-and the keys present on one side only; exit code 0 when nothing differs, 1 otherwise.
+compares them as ``h4bench compare`` does (:func:`h4bench.scenarios.compare.differences`: parsed JSON, floats bit
+for bit, timings, paths, code hashes and the platform ignored). Prints every difference (a JSON path, before,
+after) and the keys present on one side only; exit code 0 when nothing differs, 1 otherwise.
 """
 
 from __future__ import annotations
@@ -25,20 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-#: Keys whose values are timings, paths or hashes of the code: never compared (anywhere in the tree).
-IGNORED = frozenset({
-    "timings", "seconds", "wall_seconds", "runs_per_minute", "provenance", "code_hash", "spec_hash",
-    "model_hash", "version", "versions", "out", "path", "folder", "replay", "stage_seconds", "campaign_timings",
-})
-
-
-#: Keys whose values are files of the checkout (the model): compared by their path inside it (``models/h4.xml``),
-#: so that two checkouts of the same code compare equal while another model file still shows.
-CHECKOUT_PATHS = frozenset({"model"})
-
-
-def _in_checkout(path: str) -> str:
-    return "/".join(Path(path).parts[-2:])
+from h4bench.scenarios.compare import IGNORED, differences  # noqa: F401  (IGNORED: re-exported for callers)
 
 
 def scenarios() -> list[str]:
@@ -64,33 +49,6 @@ def run_all(folder: Path, skip: set[str], workers: int | None) -> int:
             f.write(line + "\n")
         failed += rc != 0
     return 1 if failed else 0
-
-
-def differences(a, b, where: str = "") -> list[str]:
-    """Every difference between two parsed JSON values (ignoring :data:`IGNORED` keys), as lines."""
-    if isinstance(a, dict) and isinstance(b, dict):
-        out = []
-        for k in sorted(set(a) | set(b)):
-            if k in IGNORED or k.endswith("seconds"):
-                continue
-            if k not in a or k not in b:
-                out.append(f"{where}/{k}: only {'after' if k not in a else 'before'}")
-                continue
-            if k in CHECKOUT_PATHS and isinstance(a[k], str) and isinstance(b[k], str):
-                out += differences(_in_checkout(a[k]), _in_checkout(b[k]), f"{where}/{k}")
-                continue
-            out += differences(a[k], b[k], f"{where}/{k}")
-        return out
-    if isinstance(a, list) and isinstance(b, list):
-        if len(a) != len(b):
-            return [f"{where}: length {len(a)} -> {len(b)}"]
-        out = []
-        for i, (x, y) in enumerate(zip(a, b)):
-            out += differences(x, y, f"{where}[{i}]")
-        return out
-    if type(a) is not type(b) or a != b:
-        return [f"{where}: {a!r} -> {b!r}"]
-    return []
 
 
 def compare(before: Path, after: Path, runs: bool) -> int:

@@ -656,6 +656,20 @@ def controller(
 
 
 @app.command()
+def compare(a: Path = typer.Argument(..., help="a result.json (or its run folder)"),
+            b: Path = typer.Argument(..., help="another result.json (or its run folder)")) -> None:
+    """Where two runs first differ: the stage (trajectory, controller, feed-forward, dataset), then the results."""
+    from h4bench.scenarios.compare import compare_results, load_result
+
+    try:
+        lines, count = compare_results(load_result(a), load_result(b))
+    except ValueError as exc:
+        _fail(str(exc))
+    typer.echo("\n".join(lines))
+    raise typer.Exit(1 if count else 0)
+
+
+@app.command()
 def version() -> None:
     """Print the versions of h4bench and of the packages its results depend on."""
     for dist in ("h4bench", "mujoco", "numpy", "scipy", "highspy", "toppra", "control", "rerun-sdk"):

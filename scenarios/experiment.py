@@ -12,8 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from h4bench import ident
+from h4bench import fingerprint, ident
 from h4bench import sim
+from h4bench.fingerprint import array_digest
 from h4bench.ident.processing.filtering import ProcessingSettings
 from h4bench.ident.robots.h4_equation import Equation, build_equation, raw_equation
 from h4bench.ident.estimators import isolation, registry
@@ -53,6 +54,7 @@ class ExperimentRun:
     width_analysis: dict | None = None
     noise_bound: float = 0.0
     noise_description: dict = field(default_factory=dict)
+    content_hashes: dict = field(default_factory=dict)  # stage -> SHA-256 (:func:`content_hashes`)
 
     @property
     def residual(self) -> np.ndarray:
@@ -100,6 +102,8 @@ class ExperimentRun:
             "budget": self.budget,
             "timings": self.timings,
             "duration": float(self.dataset.t[-1] - self.dataset.t[0]),
+            "content_hashes": self.content_hashes,
+            "platform": fingerprint.platform(),
         }
         if self.width_analysis is not None:
             out["width_analysis"] = self.width_analysis
@@ -130,12 +134,10 @@ def make_reference(spec: dict, geometry, seed: int):
 def traced_reference(spec: dict, geometry, seed: int):
     """:func:`make_reference` and where it came from: ``"memory"``, ``"disk"`` (the design cache) or
     ``"computed"`` (:func:`trajectories.excitation.cache_stats`), ``"direct"`` for the legacy cond design."""
-    from h4bench.scenarios.threads import original_blas_threads
     from h4bench.trajectories.excitation import cache_stats
 
     before = cache_stats()
-    with original_blas_threads():  # a design follows the BLAS thread count (scenarios.threads)
-        reference = make_reference(spec, geometry, seed)
+    reference = make_reference(spec, geometry, seed)  # the same design under any BLAS thread count
     after = cache_stats()
     source = next((k for k in ("memory", "disk", "computed") if after[k] != before[k]), "direct")
     return reference, source
@@ -151,7 +153,7 @@ def _feedforward_code() -> bytes:
     import importlib
 
     out = [np.__version__.encode()]
-    for name in ("h4bench.ident.robots.h4", "h4bench.sim.kinematics", "h4bench.sim.model"):
+    for name in ("h4bench.ident.robots.h4", "h4bench.sim.kinematics", "h4bench.sim.model", "h4bench.portable"):
         out.append(Path(importlib.import_module(name).__file__).read_bytes())
     return b"\0".join(out)
 
@@ -159,12 +161,11 @@ def _feedforward_code() -> bytes:
 def feedforward(geometry, theta, reference) -> np.ndarray:
     """The feed-forward torque (n, 4) [N m]: ``ident.inverse_dynamics`` of the reference with the nominal
     parameters ``theta``, kept by its inputs (the geometry, theta and the reference's q, qd, qdd, bit for bit,
-    with the inverse dynamics' source, numpy's version and the BLAS thread counts) per process and in the design
+    with the inverse dynamics' source and numpy's version; computed without BLAS) per process and in the design
     cache on disk (``sim.design_cache``, folder ``feedforward``): a campaign's runs share a few trajectories, and
     its workers and the next campaign find them there. Read-only."""
     import hashlib
 
-    from h4bench.blas import blas_threads
     from h4bench.sim.design_cache import load_array, store_array
     from h4bench.trajectories.excitation import geometry_hash
 
@@ -177,7 +178,6 @@ def feedforward(geometry, theta, reference) -> np.ndarray:
         h.update(str(arr.shape).encode())
         h.update(arr.tobytes())
     h.update(_feedforward_code())
-    h.update(repr(blas_threads()).encode())
     key = h.hexdigest()
     ff = _FEEDFORWARD.get(key)
     if ff is None:
@@ -204,6 +204,25 @@ def make_noise(spec: dict):
     if nz["shape"] == "model":
         return TorqueError.from_spec(nz["model"])
     return sim.TorqueNoise(nz["bound"], nz["shape"] if nz["bound"] > 0 else "none", nz["frequency_hz"])
+
+
+def content_hashes(reference, design, ff, dataset) -> dict:
+    """SHA-256 of each stage that selects the experiment, in the order they are made (``h4bench compare`` names
+    the first that differs): ``trajectory`` (the reference's arrays and check report,
+    :func:`trajectories.excitation.content_hash`), ``controller`` (the gains, J, Fv, period and velocity filter
+    the law runs with), ``feedforward`` (the torque (n, 4), or None without it) and ``dataset`` (t, q, tau of
+    the simulated measurement, the torque error included)."""
+    from h4bench.trajectories.excitation import content_hash
+
+    vf = design.velocity_filter_hz
+    return {
+        "trajectory": content_hash(reference),
+        "controller": array_digest([(k, getattr(design, k)) for k in ("J", "Fv", "kp", "kv", "ki")]
+                                   + [("dt", np.float64(design.dt)), ("velocity_filter_hz",
+                                                                        np.float64(np.nan if vf is None else vf))]),
+        "feedforward": None if ff is None else array_digest([("feedforward", ff)]),
+        "dataset": array_digest([(k, getattr(dataset, k)) for k in ("t", "q", "tau")]),
+    }
 
 
 def nominal_parameters() -> np.ndarray:
@@ -256,7 +275,8 @@ def run_experiment(spec: dict, seed: int | None = None, model=None, model_path: 
     run = ExperimentRun(spec=spec, seed=seed, model_path=path, model=model, geometry=geometry,
                         theta_true=theta_true, reference=reference, dataset=dataset, truth=truth, settings=settings,
                         equation=equation, prior=prior, bound_raw=bound_raw, controller_report=design.report(),
-                        timings=timings, noise_bound=float(noise.bound), noise_description=noise.describe())
+                        timings=timings, noise_bound=float(noise.bound), noise_description=noise.describe(),
+                        content_hashes=content_hashes(reference, design, ff, dataset))
     t0 = time.perf_counter()
     run.budget = error_budget(geometry, dataset, truth, settings, structure, theta=theta_true, raw=raw)
     timings["budget"] = time.perf_counter() - t0

@@ -1,15 +1,12 @@
-"""One BLAS thread per campaign worker, except while a trajectory is designed.
+"""One BLAS thread per campaign worker (speed only: no result depends on the count).
 
 A local campaign runs one worker process per core; each worker's OpenBLAS would otherwise start a thread per
 core too, and on a busy machine its small products (the WLS fit, the LP scaling) spin threads against the other
 workers': measured on 2 shared cores, WLS on a campaign run took 0.5-0.6 s with the default threads and 0.015 s
-with one. A run's results do not depend on the thread count (a quick ``enclosure`` campaign's runs are the same
-bit for bit with one thread and with the default), but a trajectory design does: its SLSQP iterates follow the
-rounding of the threaded products, and a 3 s design with 1 and with 2 threads ends in different trajectories.
-So the design runs with the thread counts the process started with (:func:`original_blas_threads`), as it
-did before workers were limited; a design is then cached and shared (``trajectories.excitation``), under a key
-that holds the thread counts it was computed with (:func:`h4bench.blas.blas_threads`): a design of other counts
-is never reused.
+with one. Nothing that selects an experiment depends on the thread count or the BLAS kernel (the trajectory
+and controller designs compute without BLAS, :mod:`h4bench.portable`), so a design made under one count is the
+one any other would make, and the design caches do not key on it. :func:`original_blas_threads` restores the
+counts the process started with inside a block (e.g. to time a threaded step).
 """
 
 from __future__ import annotations

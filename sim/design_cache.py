@@ -4,8 +4,9 @@ A design takes about a second (root finding and eight python-control step respon
 each start with none; the gains depend only on the design's inputs. Entries live in ``cache_root() /
 "controllers"``: ``$H4BENCH_CACHE`` if set, else ``$XDG_CACHE_HOME/h4bench`` (default ``~/.cache/h4bench``),
 the root the trajectory designs use too. The key is the SHA-256 of the inputs (J and Fv bit for bit, the other
-arguments), the source of the design modules, the versions of python-control, scipy and numpy and the BLAS
-thread counts in effect (:func:`h4bench.blas.blas_threads`: a design of other counts is never reused). An entry
+arguments), the source of the design modules and the versions of python-control, scipy and numpy; not the BLAS
+kernel nor its thread count (the gains come from scalar root finding on directly evaluated responses, no
+BLAS, and :mod:`h4bench.portable` for the axis inertia: the same bits on any CPU). An entry
 stores every float as ``float.hex`` (exact), is written atomically (temp file + ``os.replace``) and is used only
 if it parses into a design of the same inputs; anything else is recomputed and overwritten. A cache that cannot
 be written costs nothing but the next lookup.
@@ -21,8 +22,6 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-
-from h4bench.blas import blas_threads
 
 __all__ = ["cache_root", "design_key", "load_array", "load_design", "store_array", "store_design"]
 
@@ -57,11 +56,9 @@ def design_key(J: np.ndarray, Fv: np.ndarray, bandwidth_hz: float, dt: float, pm
     for name in _CODE:
         h.update(name.encode())
         h.update((here / name).read_bytes())
-    import scipy.linalg  # noqa: F401  (scipy's BLAS loaded, as the design will: its thread count is in the key)
-
     inputs = [[float(v).hex() for v in J], [float(v).hex() for v in Fv], float(bandwidth_hz).hex(),
               float(dt).hex(), float(pm_deg).hex(), None if velocity_filter_hz is None else float(velocity_filter_hz).hex(),
-              _versions(), blas_threads()]
+              _versions()]
     h.update(json.dumps(inputs).encode())
     return h.hexdigest()
 

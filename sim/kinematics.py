@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from h4bench.portable import matmul, solve4
 from h4bench.sim.model import H4Geometry, arm_tips, nacelle_points  # the chain points live with the geometry
 
 
@@ -113,7 +114,7 @@ def _jx_jq(geometry: H4Geometry, q: np.ndarray, x: np.ndarray):
 
 def _jacobians(geometry: H4Geometry, q: np.ndarray, x: np.ndarray) -> Jacobians:
     jx, jq, ab, pb, dc = _jx_jq(geometry, q, x)
-    j = np.linalg.solve(jx, jq[:, :, None] * np.eye(4)[None])
+    j = solve4(jx, jq[:, :, None] * np.eye(4)[None])  # no LAPACK: the same bits on any CPU (h4bench.portable)
     return Jacobians(Jx=jx, Jq=jq, J=j, AB=ab, PB=pb, DC=dc)
 
 
@@ -170,7 +171,7 @@ def forward_kinematics(geometry: H4Geometry, q, x0=None, tol: float = 1e-13, max
         # first guess is out of reach
         home = geometry.x_home[None]
         q_home = _ik(geometry, home)[0]
-        x = home + (q2 - q_home) @ _jacobians(geometry, q_home, home).J[0].T
+        x = home + matmul(q2 - q_home, _jacobians(geometry, q_home, home).J[0].T)
         out_of_reach = ~np.all(np.abs(_ik(geometry, x)[1]) <= 1.0, axis=1)
         x[out_of_reach] = geometry.x_home
     else:
@@ -186,7 +187,7 @@ def forward_kinematics(geometry: H4Geometry, q, x0=None, tol: float = 1e-13, max
             break
         idx = np.flatnonzero(active)
         jx, jq = _jx_jq(geometry, qn[idx], x[idx])[:2]
-        step = np.linalg.solve(jx, (jq * err[idx])[..., None])[..., 0]  # J (q - q_n) = Jx^-1 Jq (q - q_n)
+        step = solve4(jx, jq * err[idx])  # J (q - q_n) = Jx^-1 Jq (q - q_n)
         scale = np.ones(idx.size)
         for _halving in range(30):
             trial = x[idx] + scale[:, None] * step
@@ -248,8 +249,8 @@ def _jacobian_dot(geometry: H4Geometry, jac: Jacobians, qd: np.ndarray) -> np.nd
     jxd[..., 3] = (dcd[..., 0] * jac.AB[..., 1] + jac.DC[..., 0] * abd[..., 1]
                    - dcd[..., 1] * jac.AB[..., 0] - jac.DC[..., 1] * abd[..., 0])
     jqd = np.einsum("ia,nia->ni", geometry.motor_axis, np.cross(bd, jac.AB) + np.cross(jac.PB, abd))
-    rhs = jqd[:, :, None] * np.eye(4)[None] - jxd @ jac.J
-    return np.linalg.solve(jac.Jx, rhs)
+    rhs = jqd[:, :, None] * np.eye(4)[None] - matmul(jxd, jac.J)
+    return solve4(jac.Jx, rhs)
 
 
 def cartesian_motion(geometry: H4Geometry, q, qd, qdd, x=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -8,6 +8,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from h4bench.portable import matmul
+
 
 
 def models_dir() -> Path:
@@ -89,18 +91,18 @@ def assemble_loops(model: mujoco.MjModel, path="the model") -> float:
         model.body_pos[body] = model.site_pos[b_site]
         mujoco.mj_kinematics(model, data)
         arm_rot = data.xmat[arm].reshape(3, 3)
-        v = arm_rot.T @ (data.site_xpos[a_site] - data.xpos[body])  # B -> A in the arm frame
-        length = float(np.linalg.norm(v))
+        v = matmul(arm_rot.T, data.site_xpos[a_site] - data.xpos[body])  # B -> A in the arm frame (no BLAS)
+        length = float(np.sqrt(np.einsum("a,a->", v, v)))
         rot = np.zeros(9)
         mujoco.mju_quat2Mat(rot, model.body_quat[body])
         x0, t = rot.reshape(3, 3)[:, 0], v / length
         axis = np.cross(x0, t)
-        sin, cos = float(np.linalg.norm(axis)), float(x0 @ t)
+        sin, cos = float(np.sqrt(np.einsum("a,a->", axis, axis))), float(np.einsum("a,a->", x0, t))
         if sin > 0.0:
             turn, quat = np.zeros(4), np.zeros(4)
             mujoco.mju_axisAngle2Quat(turn, axis / sin, np.arctan2(sin, cos))
             mujoco.mju_mulQuat(quat, turn, model.body_quat[body])
-            model.body_quat[body] = quat / np.linalg.norm(quat)
+            model.body_quat[body] = quat / np.sqrt(np.einsum("a,a->", quat, quat))
         if np.abs(model.body_ipos[body] - model.site_pos[end]).max() <= LOOP_TOLERANCE:
             model.body_ipos[body] = (length, 0.0, 0.0)
         model.site_pos[end] = (length, 0.0, 0.0)

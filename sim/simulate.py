@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from h4bench.portable import matmul
 from h4bench.sim.controller import JointController, VelocityFilter
 from h4bench.sim.dataset import Dataset, GroundTruth
 from h4bench.sim.kinematics import _jacobians, forward_kinematics
@@ -85,7 +86,7 @@ def axis_inertia(geometry: H4Geometry, theta, x=None) -> np.ndarray:
     q = inverse_kinematics(geometry, x)
     j = _jacobians(geometry, q[None], x[None]).J[0]
     m = np.diag([theta[4], theta[4], theta[4], theta[5]])
-    return theta[:4] + np.diag(j.T @ m @ j)
+    return theta[:4] + np.diag(matmul(matmul(j.T, m), j))  # no BLAS: the controller's J on any CPU
 
 
 def default_controller(geometry: H4Geometry, theta_nominal, dt: float = 1e-3, bandwidth_hz: float = 15.0,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from h4bench.portable import matmul  # no BLAS: the true parameters are the same bits on any CPU
 from h4bench.sim.model import FOREARM_RODS, MOTOR_JOINTS, ModelError
 
 # a forearm rod counts as the paper's massless forearm (its mass lumped at A_i on the nacelle) when its centre
@@ -35,7 +36,7 @@ def _has_ancestor(model, body: int, root: int) -> bool:
 
 def _inertia_world(data, body: int, model) -> np.ndarray:
     rot = data.ximat[body].reshape(3, 3)
-    return rot @ np.diag(model.body_inertia[body]) @ rot.T
+    return matmul(matmul(rot, np.diag(model.body_inertia[body])), rot.T)
 
 
 def _rods(model) -> list[tuple[int, int]]:
@@ -86,11 +87,11 @@ def nacelle_mass_matrix(model: mujoco.MjModel) -> np.ndarray:
             c = data.xpos[b] - origin
             jv = np.column_stack([np.eye(3), np.cross(z, c)])
             w_izz = 0.0
-        m4 += mass * jv.T @ jv
+        m4 += mass * matmul(jv.T, jv)
         m4[3, 3] += w_izz
     for rod, bar in _rods(model):  # a point at A_i on a translating bar moves like the bar's origin C_k
         jv = np.column_stack([np.eye(3), np.cross(z, data.xpos[bar] - origin)])
-        m4 += model.body_mass[rod] * jv.T @ jv
+        m4 += model.body_mass[rod] * matmul(jv.T, jv)
     return m4
 
 
@@ -128,8 +129,9 @@ def true_parameters(model: mujoco.MjModel) -> np.ndarray:
             if model.body_jntnum[b] and b != model.jnt_bodyid[j]:
                 raise ModelError(f"the arm of {name} must be a single rigid body (found a jointed child body)")
             r = data.xipos[b] - anchor
-            r_perp = r - np.dot(r, axis) * axis
-            inertia += axis @ _inertia_world(data, b, model) @ axis + model.body_mass[b] * r_perp @ r_perp
+            r_perp = r - np.einsum("a,a->", r, axis) * axis
+            inertia += (np.einsum("a,ab,b->", axis, _inertia_world(data, b, model), axis)
+                        + model.body_mass[b] * np.einsum("a,a->", r_perp, r_perp))
         imot.append(model.dof_armature[dof] + inertia)
         fv.append(model.dof_damping[dof])
         fs.append(model.dof_frictionloss[dof])

@@ -264,18 +264,19 @@ def test_every_file_imports_the_packages_under_h4bench():
     assert found == []
 
 
-def test_the_shared_checks_sit_below_every_layer():
-    """``h4bench.checks`` is imported by sim and ident alike, so it imports nothing of the project's own."""
-    tree = ast.parse((ROOT / "h4bench" / "checks.py").read_text())
+@pytest.mark.parametrize("module, allowed", [
+    # imported by sim and ident alike: nothing of the project's own
+    ("checks", {"__future__", "numpy"}),
+    # the BLAS-free linear algebra of every layer (sim's kinematics, ident's products, the designs)
+    ("portable", {"__future__", "numpy"}),
+    # read by the designs, scenarios.threads and the platform record: the standard library only
+    ("blas", {"__future__", "contextlib", "ctypes", "os", "pathlib"}),
+    # the content hashes and platform of a run: numpy, scipy's version, the BLAS probe
+    ("fingerprint", {"__future__", "hashlib", "platform", "numpy", "scipy", "scipy.linalg", "h4bench.blas"}),
+])
+def test_the_shared_helpers_sit_below_every_layer(module, allowed):
+    """The modules of ``h4bench/`` itself are imported by every layer, so they import none of them."""
+    tree = ast.parse((ROOT / "h4bench" / f"{module}.py").read_text())
     imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
-    assert imported <= {"__future__", "numpy"}, imported
-
-
-def test_the_blas_probe_sits_below_every_layer():
-    """``h4bench.blas`` is read by the design caches of sim and trajectories and by scenarios.threads: the
-    standard library only."""
-    tree = ast.parse((ROOT / "h4bench" / "blas.py").read_text())
-    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
-    assert imported <= {"__future__", "ctypes", "os", "pathlib"}, imported
+    assert imported <= allowed, imported - allowed

@@ -67,7 +67,7 @@ class HalfWidths:
         """``sum_j weights_j dh_j/dW`` (m, p) by the envelope theorem (``dh_j/dW = y_j delta_j^T``);
         weights (p,) default: all ones."""
         w = np.ones(self.h.size) if weights is None else np.asarray(weights, float)
-        return (self.duals * w[:, None]).T @ self.delta
+        return np.einsum("jm,j,jk->mk", self.duals, w, self.delta)  # no BLAS: the same bits on any CPU
 
     def gradient_of(self, j: int) -> np.ndarray:
         """``dh_j/dW`` (m, p)."""
@@ -108,7 +108,7 @@ def halfwidths(W, bases=None) -> HalfWidths:
         out_h[j] = delta[j, j]
         out_bases.append(model.basis())
     # HiGHS's sign convention: c = W^T y + z. Flip if a build uses the opposite one (checked, not assumed).
-    ref = duals @ W  # (p, p), should be -I
+    ref = np.einsum("jm,mk->jk", duals, W)  # (p, p), should be -I
     if np.allclose(ref, np.eye(p), atol=1e-6):
         duals = -duals
     return HalfWidths(out_h, delta, duals, iters, tuple(out_bases))

@@ -27,6 +27,7 @@ import numpy as np
 
 from h4bench import ident
 from h4bench import sim
+from h4bench.portable import cond, matmul
 # unchecked: per-sample reach ratio without raising; Jd
 from h4bench.sim.kinematics import ik_unchecked, jacobian_dot_unchecked
 from h4bench.trajectories.limits import InfeasibleTrajectoryError, Limits, as_limits, as_theta
@@ -55,10 +56,10 @@ class _Check:
 
 def condition_numbers(W: np.ndarray, theta_nominal: np.ndarray) -> dict:
     """cond of W (raw), of W diag(theta_nominal) (scaled) and of W with unit-norm columns (normalised)."""
-    R = np.linalg.qr(W, mode="r")  # same singular values as W, 14 x 14 (a tall SVD is much slower)
-    out = {"cond_W": float(np.linalg.cond(R)), "cond_W_scaled": float(np.linalg.cond(R * theta_nominal[None]))}
-    norms = np.linalg.norm(W, axis=0)
-    out["cond_W_normalised"] = float(np.linalg.cond(R / norms[None])) if np.all(norms > 0) else float("inf")
+    # one-sided Jacobi (h4bench.portable), not LAPACK: the report is part of a design's content hash
+    out = {"cond_W": float(cond(W)), "cond_W_scaled": float(cond(W * theta_nominal[None]))}
+    norms = np.sqrt(np.einsum("mj,mj->j", W, W))
+    out["cond_W_normalised"] = float(cond(W / norms[None])) if np.all(norms > 0) else float("inf")
     return out
 
 
@@ -69,12 +70,12 @@ def _evaluate(geometry, x, q, qd, qdd, limits, theta):
     dq = (q - q_ik + np.pi) % (2 * np.pi) - np.pi
     q_lo, q_hi = limits.q_bounds(geometry)
     jac = sim.jacobians(geometry, q, x=x)
-    cond_jx = np.linalg.cond(jac.Jx)[:, None]
+    cond_jx = cond(jac.Jx)[:, None]
     xd = np.einsum("nab,nb->na", jac.J, qd)
     xdd = np.einsum("nab,nb->na", jac.J, qdd) + np.einsum("nab,nb->na", jacobian_dot_unchecked(geometry, jac, qd), qd)
     cart = np.stack([np.linalg.norm(xd[:, :3], axis=1), np.linalg.norm(xdd[:, :3], axis=1)], axis=1)
     W = ident.regressor(geometry, q, qd, qdd, x=x)
-    tau = (W @ theta).reshape(n, 4)
+    tau = matmul(W, theta).reshape(n, 4)
     inf4 = np.full(4, np.inf)
     vmax, amax, tmax = np.asarray(limits.qd_max), np.asarray(limits.qdd_max), limits.tau_allowed
     checks = [

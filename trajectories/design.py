@@ -8,18 +8,29 @@ reference inputs ``u = (x, xd, xdd)`` (12 numbers; (q, qd, qdd) in joint space) 
 gradient needs only the 12 partial derivatives dy/du per sample (forward differences, one batched call on 13 n
 samples) and the chain rule ``dy/dz = dy/du B``: 13 evaluations per sample instead of 2 H 4 + 1 = 41.
 
-Objective: ``log cond(W diag(theta))`` (eigenvalues of the 14 x 14 Gram matrix; its gradient from the extreme
-eigenvectors v: ``d lambda = 2 (W v) . (dW v)``), with tanh(qd / SIGN_WIDTH) for sign(qd) in the Coulomb columns.
+Objective: ``log cond(W diag(theta))`` (singular values by one-sided Jacobi rotations,
+:func:`h4bench.portable.jacobi_svd`; its gradient from the extreme right singular vectors v, the eigenvectors of
+the Gram matrix: ``d lambda = 2 (W v) . (dW v)``), with tanh(qd / SIGN_WIDTH) for sign(qd) in the Coulomb columns.
 Constraints: for each limit and joint/axis, the largest normalised violation over the grid (<= 0 satisfied;
 gradient at the worst sample); SLSQP.
 """
 
 from __future__ import annotations
 
+import os
+import pickle
+import platform
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import OptimizeResult, minimize
 
 from h4bench import sim
+from h4bench.blas import one_blas_thread
+from h4bench.portable import det4, jacobi_svd, solve4
 
 #: The optimiser's Coulomb columns use tanh(qd / SIGN_WIDTH) for sign(qd) [rad/s]: sign has no derivative
 #: (a finite-difference step across qd = 0 would jump); samples that slow are excluded or given an interval
@@ -27,12 +38,25 @@ from h4bench import sim
 SIGN_WIDTH = 0.05
 #: Forward-difference steps on x, xd, xdd (or q, qd, qdd) per sample.
 FD_STEP = np.repeat([1e-7, 1e-6, 1e-5], 4)
+#: The optimiser's iterates are evaluated on a fixed grid: the criterion, the constraints and their gradients
+#: are computed at z rounded to a multiple of SNAP (2^-24, about 6e-8 of the O(1) scaled coefficients; exact in
+#: binary) and the result is rounded too, so that a last-bit difference of SLSQP's own steps changes nothing
+#: unless it straddles a grid boundary. Those steps call scipy's BLAS and LAPACK, so they run on one OpenBLAS
+#: kernel and one thread wherever that can be forced (:meth:`CoefficientProblem.optimise`): measured, a design
+#: on one thread still differed between the Haswell and SandyBridge kernels (seed 7, 4 s) before that. Everything
+#: computed at a point is itself BLAS-free (:mod:`h4bench.portable`).
+SNAP = 2.0 ** -24
 CONSTRAINT_NAMES = tuple(f"{c}:{i}" for c, n in (("x_upper", 4), ("x_lower", 4), ("q_upper", 4), ("q_lower", 4),
                                                  ("reach", 4), ("cond_jx", 1), ("qd", 4), ("qdd", 4), ("tau", 4))
                          for i in range(n))
 # per-sample outputs y: columns of the (N, 29) array
 _X, _Q, _QD, _QDD, _RATIO, _MNAC, _IBC, _CONDJX = (slice(0, 4), slice(4, 8), slice(8, 12), slice(12, 16),
                                                     slice(16, 20), slice(20, 24), slice(24, 28), slice(28, 29))
+
+
+def snap(z) -> np.ndarray:
+    """z (nz,) rounded to the nearest multiple of :data:`SNAP` (exact: a power-of-two scaling and a rounding)."""
+    return np.round(np.asarray(z, float) / SNAP) * SNAP
 
 
 def _cross(a, b):
@@ -81,9 +105,9 @@ def fast_motion(geometry, x, xd, xdd) -> dict:
         rhs = np.zeros(x.shape[:1] + (4, 2))
         rhs[:, :3, 0] = xdd[:, :3] - g.gravity[None]
         rhs[:, 3, 1] = xdd[:, 3]
-        ok = np.all(np.isfinite(jx), axis=(1, 2)) & (np.abs(np.linalg.det(jx)) > 1e-12)
+        ok = np.all(np.isfinite(jx), axis=(1, 2)) & (np.abs(det4(jx)) > 1e-12)
         y = np.full_like(rhs, np.nan)
-        y[ok] = np.linalg.solve(np.swapaxes(jx[ok], 1, 2), rhs[ok])
+        y[ok] = solve4(np.swapaxes(jx[ok], 1, 2), rhs[ok])
         jtv = jq[..., None] * y
     return {"q": q, "qd": qd, "qdd": qdd, "ratio": np.abs(ratio), "Jx": jx, "mnac": jtv[..., 0],
             "ibc": jtv[..., 1]}
@@ -143,7 +167,7 @@ class CoefficientProblem:
 
     def inputs(self, z) -> np.ndarray:
         """u (n, 12) = (pos, vel, acc) in the design space."""
-        return self.u0[None] + self.B @ np.asarray(z, float)
+        return self.u0[None] + np.einsum("nkz,z->nk", self.B, np.asarray(z, float))
 
     def outputs(self, U, cond_jx=True) -> np.ndarray:
         """y (N, 29) per sample: x, q, qd, qdd, reach ratio, Mnac column, Ibc column, cond(Jx) (NaN unless
@@ -158,9 +182,9 @@ class CoefficientProblem:
         cond = np.full((x.shape[0], 1), np.nan)
         if cond_jx:
             jx = np.where(np.isfinite(m["Jx"]), m["Jx"], 0.0)
-            ev = np.linalg.eigvalsh(np.matmul(np.swapaxes(jx, 1, 2), jx))  # squared singular values, ascending
+            sv = jacobi_svd(jx)  # descending
             with np.errstate(invalid="ignore", divide="ignore"):
-                cond[:, 0] = np.sqrt(ev[:, -1] / ev[:, 0])
+                cond[:, 0] = sv[:, 0] / sv[:, -1]
         return np.concatenate([x, m["q"], m["qd"], m["qdd"], m["ratio"], m["mnac"], m["ibc"], cond], axis=1)
 
     def _regressor_times(self, y, v):
@@ -234,7 +258,7 @@ class CoefficientProblem:
             dy_du = (Y[1:] - y[None]) / FD_STEP[:, None, None]  # (12, n, 29)
             if not np.all(np.isfinite(dy_du)):
                 return self._failed(gradient)
-            dy = np.matmul(dy_du.transpose(1, 2, 0), self.B)  # (n, 29, nz)
+            dy = np.einsum("kny,nkz->nyz", dy_du, self.B)  # (n, 29, nz)
         objective = self.objective(y, dy)
         if objective is None:
             return self._failed(gradient)
@@ -250,7 +274,8 @@ class CoefficientProblem:
         (value, gradient (nz,) or None), or None when the design is degenerate. Here log cond(W diag(theta));
         subclasses override it (:class:`trajectories.bounded.HalfwidthProblem`)."""
         Ws = self._scaled_regressor(y)
-        lam, vec = np.linalg.eigh(Ws.T @ Ws)
+        sv, vec = jacobi_svd(Ws, vectors=True)  # descending; Ws^T Ws = V diag(sv^2) V^T
+        lam, vec = sv[::-1] ** 2, vec[:, ::-1]  # ascending, as eigh's
         if lam[0] <= 0:
             return None
         log_cond = 0.5 * np.log(lam[-1] / lam[0])
@@ -297,6 +322,7 @@ class CoefficientProblem:
         return lo
 
     def _memo(self, z):
+        z = snap(z)  # the same points on every machine (SNAP)
         if self._cache is None or not np.array_equal(self._cache[0], z):
             log_cond, cons, grad, dcons = self.evaluate(z, gradient=True)
             if not np.isfinite(log_cond):  # steer SLSQP back: a large objective, constraints violated
@@ -304,10 +330,64 @@ class CoefficientProblem:
             self._cache = (np.array(z, copy=True), log_cond, grad, cons, dcons)
         return self._cache[1:]
 
-    def optimise(self, z0, max_iter: int):
-        """SLSQP from z0: minimise the criterion subject to every constraint value <= 0 (scipy: -cons >= 0)."""
+    def __getstate__(self) -> dict:
+        """Pickled without the evaluation memo and the LP warm start (HiGHS bases): for :meth:`optimise`'s
+        process, which starts both afresh."""
+        state = dict(self.__dict__)
+        state["_cache"] = None
+        for key in ("last", "_last_keep"):
+            if key in state:
+                state[key] = None
+        return state
+
+    def _slsqp(self, z0, max_iter: int):
+        """SLSQP from z0 in this process (see :meth:`optimise`)."""
         self._cache = None
-        return minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
-                        options={"maxiter": max_iter, "ftol": 1e-4},
-                        constraints=[{"type": "ineq", "fun": lambda z: -self._memo(z)[2],
-                                      "jac": lambda z: -self._memo(z)[3]}])
+        with one_blas_thread():  # SLSQP's own BLAS calls: no thread-count dependence (h4bench.blas)
+            res = minimize(lambda z: self._memo(z)[0], z0, jac=lambda z: self._memo(z)[1], method="SLSQP",
+                           options={"maxiter": max_iter, "ftol": 1e-4},
+                           constraints=[{"type": "ineq", "fun": lambda z: -self._memo(z)[2],
+                                         "jac": lambda z: -self._memo(z)[3]}])
+        res.x = snap(res.x)
+        return res
+
+    def optimise(self, z0, max_iter: int):
+        """SLSQP from z0: minimise the criterion subject to every constraint value <= 0 (scipy: -cons >= 0);
+        the criterion, constraints and gradients are evaluated at :func:`snap` (z), and the result's ``x`` is
+        snapped too. Returns scipy's OptimizeResult (``x``, ``nit``, ``nfev``, ``message``).
+
+        SLSQP's own steps call scipy's BLAS and LAPACK, whose kernel OpenBLAS picks by CPU: on x86-64 the
+        optimisation runs in a child process whose OpenBLAS is forced to one kernel and one thread
+        (:data:`SLSQP_ENVIRONMENT`), so that every machine takes the same steps (elsewhere, or with
+        ``H4BENCH_SLSQP_IN_PROCESS=1``, in this process on its own kernel, one thread)."""
+        if platform.machine().lower() not in ("x86_64", "amd64") or os.environ.get("H4BENCH_SLSQP_IN_PROCESS") == "1":
+            return self._slsqp(z0, max_iter)
+        with tempfile.TemporaryDirectory(prefix="h4bench-slsqp-") as tmp:
+            task, answer = Path(tmp) / "task.pkl", Path(tmp) / "result.pkl"
+            task.write_bytes(pickle.dumps((self, np.asarray(z0, float), int(max_iter))))
+            env = dict(os.environ, **SLSQP_ENVIRONMENT)
+            done = subprocess.run([sys.executable, "-c", _CHILD, str(task), str(answer)], env=env,
+                                  capture_output=True, text=True)
+            if done.returncode != 0:
+                raise RuntimeError(f"the design's optimiser process failed ({done.returncode}): "
+                                   f"{done.stderr.strip()[-2000:]}")
+            x, nit, nfev, message = pickle.loads(answer.read_bytes())
+        self._cache = None
+        return OptimizeResult(x=x, nit=nit, nfev=nfev, message=message)
+
+
+#: The environment of :meth:`CoefficientProblem.optimise`'s process: OpenBLAS's Nehalem kernel (SSE4.2, which
+#: numpy 2 already requires of an x86-64 CPU) and one thread, whatever the CPU and the caller's environment.
+SLSQP_ENVIRONMENT = {"OPENBLAS_CORETYPE": "Nehalem", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+                     "OPENBLAS_L2_SIZE": "262144", "H4BENCH_SLSQP_IN_PROCESS": "1"}
+_CHILD = ("import pickle, sys\n"
+          "from h4bench.trajectories.design import optimise_task\n"
+          "optimise_task(sys.argv[1], sys.argv[2])\n")
+
+
+def optimise_task(task: str, answer: str) -> None:
+    """The body of :meth:`CoefficientProblem.optimise`'s process: unpickle (problem, z0, max_iter) from the file
+    ``task``, run SLSQP, pickle (x, nit, nfev, message) into the file ``answer``."""
+    prob, z0, max_iter = pickle.loads(Path(task).read_bytes())
+    res = prob._slsqp(z0, max_iter)
+    Path(answer).write_bytes(pickle.dumps((np.asarray(res.x, float), int(res.nit), int(res.nfev), str(res.message))))

@@ -6,9 +6,11 @@ Cache. A design takes seconds to tens of seconds; campaigns and reruns ask for t
 ``$XDG_CACHE_HOME/h4bench/trajectories`` (default ``~/.cache/h4bench/trajectories``). The key is the SHA-256 of
 every input that changes the result: the geometry's arrays, the limits, seed, duration, criterion, processing
 settings, targets, nominal parameters, the remaining design options, the source code of the design modules
-(:data:`CODE_FILES`, so an edit invalidates old entries) and the BLAS thread counts the design runs under (its
-SLSQP iterates follow the threaded products' rounding: :func:`h4bench.blas.blas_threads`). Files are written atomically (temp file +
-``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
+(:data:`CODE_FILES` and :mod:`h4bench.portable`, so an edit invalidates old entries) and the versions of numpy
+and scipy. Not the BLAS kernel nor its thread count: the design's result does not depend on them (its
+criterion, constraints and gradients are computed without BLAS and its iterates on a fixed grid,
+:mod:`trajectories.design`), so an entry designed on one machine is the one any other would design. Files are
+written atomically (temp file + ``os.replace``, :meth:`trajectories.Trajectory.save`). An entry is used only if it loads, carries the same key
 and inputs, and either holds exactly the arrays that passed :func:`trajectories.check_trajectory` when it was
 designed (their SHA-256 and the check report's, stored with the entry, :func:`content_hash`: the key already
 covers the geometry, limits, nominal parameters and the checks' code, so the check would repeat itself) or, for
@@ -33,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from h4bench import ident
-from h4bench.blas import blas_threads
+from h4bench import ident, portable
+from h4bench.fingerprint import array_digest
 from h4bench import sim
 from h4bench.trajectories.bounded import as_targets
 from h4bench.trajectories.checks import check_trajectory
@@ -72,7 +74,15 @@ def _code_hash() -> str:
     for name in CODE_FILES:
         h.update(name.encode())
         h.update((here / name).read_bytes())
+    h.update(b"portable.py")
+    h.update(Path(portable.__file__).read_bytes())
     return h.hexdigest()
+
+
+def _versions() -> dict:
+    import scipy  # noqa: PLC0415
+
+    return {"numpy": np.__version__, "scipy": scipy.__version__}
 
 
 def geometry_hash(geometry) -> str:
@@ -89,12 +99,10 @@ def geometry_hash(geometry) -> str:
 
 
 def cache_inputs(geometry, duration, seed, limits, criterion, processing, targets, theta_nominal, options) -> dict:
-    """The JSON-ready inputs that identify a design (what the key hashes), with the BLAS thread counts in effect
-    (:func:`h4bench.blas.blas_threads`: the optimiser's iterates follow the threaded products' rounding)."""
-    import scipy.linalg  # noqa: F401  (scipy's BLAS loaded, as the design will: its thread count is in the key)
-
+    """The JSON-ready inputs that identify a design (what the key hashes): not the BLAS kernel nor its thread
+    count, which do not change the result (module docstring)."""
     return {
-        "geometry": geometry_hash(geometry), "code": _code_hash(), "blas": blas_threads(),
+        "geometry": geometry_hash(geometry), "code": _code_hash(), "versions": _versions(),
         "duration": float(duration), "seed": int(seed),
         "limits": limits.to_dict(), "criterion": criterion, "processing": asdict(processing),
         "targets": None if targets is None else [float(v) for v in targets],
@@ -108,13 +116,8 @@ def cache_key(inputs: dict) -> str:
 
 def content_hash(traj: Trajectory) -> str:
     """SHA-256 of a trajectory's arrays (dtype, shape, bytes) and of its check report (JSON)."""
-    h = hashlib.sha256()
-    for name in ("t", "x", "q", "qd", "qdd"):
-        arr = np.ascontiguousarray(getattr(traj, name))
-        h.update(f"{name}:{arr.dtype.str}:{arr.shape}".encode())
-        h.update(arr.tobytes())
-    h.update(json.dumps(traj.checks, sort_keys=True, default=str).encode())
-    return h.hexdigest()
+    return array_digest([(name, getattr(traj, name)) for name in ("t", "x", "q", "qd", "qdd")],
+                        json.dumps(traj.checks, sort_keys=True, default=str).encode())
 
 
 def _load_valid(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Trajectory | None:

@@ -50,6 +50,7 @@ import numpy as np
 
 from h4bench import ident
 from h4bench import sim
+from h4bench.portable import matmul
 from h4bench.ident.processing.filtering import ProcessingSettings
 # unchecked, vectorised (no re-validation)
 from h4bench.sim.kinematics import ik_unchecked, jacobian_dot_unchecked, jacobians_unchecked
@@ -119,7 +120,7 @@ def fourier_path(a, b, phi):
 
     a, b : (H, 4) coefficients; phi : (n,) phase [cycles].
     """
-    return tuple(ba @ a + bb @ b for ba, bb in fourier_basis(a.shape[0], phi))
+    return tuple(matmul(ba, a) + matmul(bb, b) for ba, bb in fourier_basis(a.shape[0], phi))
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,9 @@ import warnings
 
 import numpy as np
 
+from h4bench.portable import jacobi_svd, lstsq
+from h4bench.portable import matmul as pmatmul
+
 from h4bench.ident.box import Box, default_names
 from h4bench.ident.errors import InconsistentDataError, LPError, LPFallbackWarning, UnidentifiableError
 from h4bench.ident.estimators import registry
@@ -64,10 +67,11 @@ def identifiability(W: np.ndarray, names, *, rcond: float = 1e-7, gram=None) -> 
     subspace (``sum_k V_jk^2 > 0.01``), i.e. when the data cannot tell it apart from other parameters.
     Returns ``{"cond": float, "unidentifiable": tuple of names}``.
     """
-    G = W.T @ W if gram is None else gram
+    G = pmatmul(W.T, W) if gram is None else gram
     d = np.sqrt(np.diag(G))
     d[d == 0.0] = 1.0
-    lam, V = np.linalg.eigh(G / d[:, None] / d[None, :])
+    sv, V = jacobi_svd(G / d[:, None] / d[None, :], vectors=True)  # no LAPACK: the same bits on any CPU
+    lam, V = sv[::-1], V[:, ::-1]  # eigenvalues of the PSD Gram matrix, ascending (as eigh's)
     sig = np.sqrt(np.clip(lam, 0.0, None))
     smax = sig[-1] if sig.size else 0.0
     weak = sig <= rcond * smax if smax > 0 else np.ones_like(sig, dtype=bool)
@@ -117,7 +121,7 @@ def min_consistent_bound(W, y, prior) -> float:
     """
     W, y = check_W_y(W, y)
     lo, hi, _ = check_prior(prior, W.shape[1])
-    G = W.T @ W
+    G = pmatmul(W.T, W)
     return _min_bound(W, y, lo, hi, least_squares_center(G, W, y, lo, hi))
 
 
@@ -152,14 +156,15 @@ def least_squares_center(G: np.ndarray, W: np.ndarray, y: np.ndarray, lo, hi, b=
         rhs = np.zeros(W.shape[1])
         for s in range(0, W.shape[0], 8192):
             Wb = W[s : s + 8192] / b[s : s + 8192, None]
-            G += Wb.T @ Wb
-            rhs += Wb.T @ (y[s : s + 8192] / b[s : s + 8192])
+            G += pmatmul(Wb.T, Wb)
+            rhs += pmatmul(Wb.T, y[s : s + 8192] / b[s : s + 8192])
     else:
-        rhs = W.T @ y
+        rhs = pmatmul(W.T, y)
     d = np.sqrt(np.diag(G))
     d[d == 0.0] = 1.0
     with np.errstate(all="ignore"):
-        sol = np.linalg.lstsq(G / d[:, None] / d[None, :], rhs / d, rcond=1e-12)[0] / d
+        # einsum and Jacobi rotations, not BLAS/LAPACK: the LPs' centre (and so HiGHS's path) on any CPU
+        sol = lstsq(G / d[:, None] / d[None, :], rhs / d, rcond=1e-12) / d
     sol = np.where(np.isfinite(sol), sol, 0.5 * lo + 0.5 * hi)
     return np.clip(sol, lo, hi)
 
@@ -242,7 +247,7 @@ def _builtin_estimate(W, y, bound, prior, method: str = "hull", *, check_consist
     lo, hi, names = check_prior(prior, p)
     bl, bu = strip_bounds(y, b)
 
-    G = W.T @ W
+    G = pmatmul(W.T, W)
     info: dict = {"method": method}
     info.update(identifiability(W, names, gram=G))
 

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.numerics.interval import down, mid_rad, point_matmul, up
+from h4bench.portable import matmul as pmatmul
 from h4bench.ident.numerics.lp import (
     LPError,
     LPFallbackWarning,
@@ -88,8 +89,8 @@ def strip_bounds(y: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarr
 def _matvec(W: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``W @ x`` block by block (float)."""
     out = np.empty(W.shape[0])
-    for s in range(0, W.shape[0], _CHUNK):
-        np.matmul(W[s : s + _CHUNK], x, out=out[s : s + _CHUNK])
+    for s in range(0, W.shape[0], _CHUNK):  # einsum, not BLAS: the LPs' data are the same bits on any CPU
+        out[s : s + _CHUNK] = pmatmul(W[s : s + _CHUNK], x)
     return out
 
 
@@ -254,7 +255,8 @@ class _WorkingSet:
             cnt, complete = self._prefix(sol.z[:, None])
             if cnt == 0:
                 return sol, rows, earlier
-            v = self.nW[:cnt] @ sol.z  # in place: v = (|W z - m0| - half) / unit, the scaled violation
+            # einsum (the same rows chosen on any CPU); in place: v = (|W z - m0| - half) / unit, the scaled violation
+            v = pmatmul(self.nW[:cnt], sol.z)
             v -= self.nm0[:cnt]
             np.abs(v, out=v)
             v -= self.nhalf[:cnt]
@@ -273,7 +275,7 @@ class _WorkingSet:
         per column, the rows added."""
         cnt, complete = self._prefix(dx_cols)
         if complete:
-            dev = np.abs(self.nW[:cnt] @ dx_cols - self.nm0[:cnt, None])
+            dev = np.abs(pmatmul(self.nW[:cnt], dx_cols) - self.nm0[:cnt, None])
             rows = self.near[:cnt]
             hit = (dev.max(axis=1) > self.nhalf[:cnt] + violation_tol * self.unit[rows]) & ~self.nmask[:cnt]
             rows, dev = rows[hit], dev[hit]
@@ -515,7 +517,7 @@ def _scaled_residuals(W, e0, w, dtheta) -> np.ndarray:
     out = np.empty(n_rows)
     for b in range(0, n_rows, _CHUNK):
         e = min(n_rows, b + _CHUNK)
-        out[b:e] = np.abs(e0[b:e] - W[b:e] @ dtheta) / w[b:e]
+        out[b:e] = np.abs(e0[b:e] - pmatmul(W[b:e], dtheta)) / w[b:e]
     return out
 
 

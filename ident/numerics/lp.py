@@ -45,6 +45,7 @@ import highspy
 import numpy as np
 
 from h4bench.ident.errors import LPError, LPFallbackWarning
+from h4bench.portable import matmul as pmatmul
 from h4bench.ident.numerics.interval import TINY, U, down, mul, point_matmul, sub, sum_down, up
 
 __all__ = [
@@ -314,7 +315,7 @@ class LPModel:
         power of two nearest ``1 / row_scale``. The bounds are shifted to the centre (``lo - A center``).
         """
         A = np.asarray(A, dtype=float)
-        a0 = A @ self.center
+        a0 = pmatmul(A, self.center)  # no BLAS: HiGHS sees the same bits on any CPU
         self.add_shifted_rows(A, np.asarray(lo, float) - a0, np.asarray(hi, float) - a0, row_scale)
 
     def add_shifted_rows(self, A, lo_shift, hi_shift, row_scale=None) -> None:
@@ -552,8 +553,8 @@ class SafeBounds:
         rows = down(np.where(Y > 0, Y * np.where(Y > 0, sbl[:, None], 0.0),
                              Y * np.where(Y < 0, sbu[:, None], 0.0)))
         self.rows = np.where(Y != 0.0, rows, 0.0)  # (m, k): min(y bl, y bu) rounded down, exact zeros elsewhere
-        g = A.T @ Y  # (n, k)
-        e = up(up(_dot_constant(counts) * (np.abs(A).T @ np.abs(Y))) + TINY)
+        g = pmatmul(A.T, Y)  # (n, k); einsum, not BLAS (the same bits on any CPU)
+        e = up(up(_dot_constant(counts) * pmatmul(np.abs(A).T, np.abs(Y))) + TINY)
         none = counts == 0  # no row: the product is exactly zero
         self.rlo, self.rhi = sub(np.where(none, 0.0, down(g - e)), np.where(none, 0.0, up(g + e)), C.T, C.T)
         self.cx0 = sum_down(down(C * self.x0), axis=1)  # (k,) c_j^T x0, rounded down

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from h4bench.portable import matmul
+
 # The 14 base parameters of the H4 inverse dynamic model (paper eq. 18); the order is defined here once,
 # every other module refers to PARAMETER_NAMES.
 PARAMETER_NAMES: tuple[str, ...] = (
@@ -117,7 +119,7 @@ def regressor(geometry, q, qd, qdd, structure: str = "paper", x=None, xdd=None) 
     eye = np.eye(4)[None]
     joint = np.arange(4)
     w[:, joint, joint] = qdd  # Imot_i qdd_i on row i
-    w[..., 4] = (jac.J[:, :3, :].transpose(0, 2, 1) @ (xdd[:, :3] - g4[:3])[..., None])[..., 0]
+    w[..., 4] = np.einsum("naj,na->nj", jac.J[:, :3, :], xdd[:, :3] - g4[:3])  # no BLAS (h4bench.portable)
     w[..., 5] = jac.J[:, 3, :] * xdd[:, 3, None]
     w[:, joint, 6 + joint] = qd
     w[:, joint, 10 + joint] = np.sign(qd)
@@ -149,5 +151,5 @@ def inverse_dynamics(geometry, theta, q, qd, qdd, structure: str = "paper", x=No
     if theta.shape != (p,):
         raise ValueError(f"theta must have shape ({p},) for structure {structure!r}, got {theta.shape}")
     w = regressor(geometry, q, qd, qdd, structure=structure, x=x, xdd=xdd)
-    tau = (w @ theta).reshape(-1, 4)
+    tau = matmul(w, theta).reshape(-1, 4)
     return tau[0] if np.ndim(q) == 1 else tau

@@ -1,0 +1,147 @@
+"""Small linear algebra whose results are the same bits on any CPU and BLAS thread count (numpy only).
+
+OpenBLAS picks its kernel by CPU (``OPENBLAS_CORETYPE`` forces one) and splits products over threads; the
+kernels differ in the order of their sums and in fused multiply-adds, so ``@``, ``np.dot``, ``np.linalg.solve``,
+``eigh``, ``svd``, ``qr`` and ``cond`` give results that differ in their last bits from one machine to another.
+Where such a result chooses something (an optimiser's step, a feasibility decision, a hashed trajectory), the
+computation here replaces it: element-wise IEEE operations (+, -, *, /, sqrt: correctly rounded everywhere)
+and ``np.einsum`` without ``optimize`` (numpy's own loops, never BLAS), in an order fixed by the code.
+
+- :func:`matmul`: ``A @ B`` over the last two axes (batched);
+- :func:`det4`, :func:`solve4`: determinant and solution of 4 x 4 systems by cofactors (batched);
+- :func:`jacobi_svd`: singular values (and right singular vectors) by one-sided Jacobi rotations (batched),
+  :func:`cond`: the 2-norm condition number from them, :func:`lstsq`: the minimum-norm least-squares solution
+  with a relative cut-off (``np.linalg.lstsq``'s ``rcond``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["cond", "det4", "jacobi_svd", "lstsq", "matmul", "solve4"]
+
+
+def matmul(a, b) -> np.ndarray:
+    """``a @ b`` (..., m, k) x (..., k, n) -> (..., m, n), with ``@``'s rules for a vector operand ((k,) on the
+    left or the right), by ``np.einsum`` (no BLAS: the same bits on any CPU; each sum in the order of k, so
+    the usual ``gamma_k |a| |b|`` bound of its rounding error holds)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.ndim == 1 and b.ndim == 1:
+        return np.einsum("j,j->", a, b)
+    if a.ndim == 1:
+        return np.einsum("j,...jk->...k", a, b)
+    if b.ndim == 1:
+        return np.einsum("...ij,j->...i", a, b)
+    return np.einsum("...ij,...jk->...ik", a, b)
+
+
+def _minors(a):
+    """The twelve 2 x 2 minors of the row pairs (0, 1) and (2, 3) of 4 x 4 matrices a (..., 4, 4)."""
+    s = [a[..., 0, i] * a[..., 1, j] - a[..., 1, i] * a[..., 0, j] for i, j in _PAIRS]
+    c = [a[..., 2, i] * a[..., 3, j] - a[..., 3, i] * a[..., 2, j] for i, j in _PAIRS]
+    return s, c
+
+
+_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+
+
+def det4(a) -> np.ndarray:
+    """Determinants (...,) of 4 x 4 matrices a (..., 4, 4) (Laplace expansion on the 2 x 2 minors)."""
+    s, c = _minors(np.asarray(a, float))
+    return s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
+
+
+def solve4(a, b) -> np.ndarray:
+    """x with ``a x = b`` for 4 x 4 matrices a (..., 4, 4) and right-hand sides b (..., 4, k) or (..., 4):
+    the adjugate over the determinant (a singular a gives inf or nan, never an exception)."""
+    a = np.asarray(a, float)
+    s, c = _minors(a)
+    det = s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
+    m = lambda r, i: a[..., r, i]  # noqa: E731
+    adj = np.empty(a.shape)
+    adj[..., 0, 0] = m(1, 1) * c[5] - m(1, 2) * c[4] + m(1, 3) * c[3]
+    adj[..., 0, 1] = -m(0, 1) * c[5] + m(0, 2) * c[4] - m(0, 3) * c[3]
+    adj[..., 0, 2] = m(3, 1) * s[5] - m(3, 2) * s[4] + m(3, 3) * s[3]
+    adj[..., 0, 3] = -m(2, 1) * s[5] + m(2, 2) * s[4] - m(2, 3) * s[3]
+    adj[..., 1, 0] = -m(1, 0) * c[5] + m(1, 2) * c[2] - m(1, 3) * c[1]
+    adj[..., 1, 1] = m(0, 0) * c[5] - m(0, 2) * c[2] + m(0, 3) * c[1]
+    adj[..., 1, 2] = -m(3, 0) * s[5] + m(3, 2) * s[2] - m(3, 3) * s[1]
+    adj[..., 1, 3] = m(2, 0) * s[5] - m(2, 2) * s[2] + m(2, 3) * s[1]
+    adj[..., 2, 0] = m(1, 0) * c[4] - m(1, 1) * c[2] + m(1, 3) * c[0]
+    adj[..., 2, 1] = -m(0, 0) * c[4] + m(0, 1) * c[2] - m(0, 3) * c[0]
+    adj[..., 2, 2] = m(3, 0) * s[4] - m(3, 1) * s[2] + m(3, 3) * s[0]
+    adj[..., 2, 3] = -m(2, 0) * s[4] + m(2, 1) * s[2] - m(2, 3) * s[0]
+    adj[..., 3, 0] = -m(1, 0) * c[3] + m(1, 1) * c[1] - m(1, 2) * c[0]
+    adj[..., 3, 1] = m(0, 0) * c[3] - m(0, 1) * c[1] + m(0, 2) * c[0]
+    adj[..., 3, 2] = -m(3, 0) * s[3] + m(3, 1) * s[1] - m(3, 2) * s[0]
+    adj[..., 3, 3] = m(2, 0) * s[3] - m(2, 1) * s[1] + m(2, 2) * s[0]
+    b = np.asarray(b, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if b.ndim == a.ndim - 1:
+            return np.einsum("...ij,...j->...i", adj, b) / det[..., None]
+        return np.einsum("...ij,...jk->...ik", adj, b) / det[..., None, None]
+
+
+#: Sweeps of :func:`jacobi_svd` at most (each rotates every column pair once; quadratic convergence: 6-10 suffice).
+MAX_SWEEPS = 30
+
+
+def jacobi_svd(a, vectors: bool = False):
+    """Singular values (..., n) in descending order of a (..., m, n), m >= n, by one-sided (Hestenes) Jacobi
+    rotations of the columns in a fixed cyclic order until every pair is orthogonal to ``n eps`` relative
+    (at most :data:`MAX_SWEEPS` sweeps); with ``vectors``, also the right singular vectors V (..., n, n),
+    column j for value j (``a^T a V = V diag(s^2)``). Same bits on any CPU (module docstring)."""
+    u = np.array(np.swapaxes(np.asarray(a, float), -1, -2), copy=True)  # (..., n, m): column j is row j
+    n = u.shape[-2]
+    v = np.broadcast_to(np.eye(n), u.shape[:-2] + (n, n)).copy() if vectors else None
+    tol = n * np.finfo(float).eps
+    for _ in range(MAX_SWEEPS):
+        rotated = False
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                up, uq = u[..., p, :], u[..., q, :]
+                alpha = np.einsum("...i,...i->...", up, up)
+                beta = np.einsum("...i,...i->...", uq, uq)
+                gamma = np.einsum("...i,...i->...", up, uq)
+                rot = np.abs(gamma) > tol * np.sqrt(alpha * beta)
+                if not np.any(rot):
+                    continue
+                rotated = True
+                g = np.where(rot, gamma, 1.0)
+                zeta = (beta - alpha) / (2.0 * g)
+                with np.errstate(over="ignore"):  # |zeta| > 1e154: t = 0 (its limit, ~1/(2 |zeta|), is below 1e-154)
+                    t = np.where(zeta >= 0, 1.0, -1.0) / (np.abs(zeta) + np.sqrt(1.0 + zeta * zeta))
+                cs = np.where(rot, 1.0 / np.sqrt(1.0 + t * t), 1.0)
+                sn = np.where(rot, cs * t, 0.0)
+                cs, sn = cs[..., None], sn[..., None]
+                u[..., p, :], u[..., q, :] = cs * up - sn * uq, sn * up + cs * uq
+                if vectors:
+                    vp, vq = v[..., :, p].copy(), v[..., :, q].copy()
+                    v[..., :, p], v[..., :, q] = cs * vp - sn * vq, sn * vp + cs * vq
+        if not rotated:
+            break
+    s = np.sqrt(np.einsum("...ji,...ji->...j", u, u))
+    order = np.argsort(-s, axis=-1, kind="stable")
+    s = np.take_along_axis(s, order, axis=-1)
+    if not vectors:
+        return s
+    return s, np.take_along_axis(v, order[..., None, :], axis=-1)
+
+
+def cond(a) -> np.ndarray:
+    """2-norm condition numbers (...,) of a (..., m, n), m >= n: largest over smallest singular value
+    (:func:`jacobi_svd`; inf for a singular matrix)."""
+    s = jacobi_svd(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return s[..., 0] / s[..., -1]
+
+
+def lstsq(a, b, rcond: float = 1e-12) -> np.ndarray:
+    """The minimum-norm least-squares solution x (n,) of ``a x ~ b`` for a (m, n), m >= n, b (m,): singular
+    values below ``rcond`` times the largest are dropped (as ``np.linalg.lstsq(a, b, rcond)[0]``), from
+    :func:`jacobi_svd`: ``x = V diag(1/s) U^T b`` with ``U = a V diag(1/s)``. Same bits on any CPU."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    s, v = jacobi_svd(a, vectors=True)
+    keep = s > rcond * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, dtype=bool)
+    u = matmul(a, v[:, keep]) / s[keep]
+    return matmul(v[:, keep], matmul(b, u) / s[keep])

@@ -1,0 +1,81 @@
+"""Same seed, same numbers under any BLAS kernel and thread count: a short paper experiment (designed trajectory,
+controller, feed-forward, simulation, hull box) in fresh processes with ``OPENBLAS_CORETYPE`` in {Haswell,
+SandyBridge} x ``OPENBLAS_NUM_THREADS`` in {1, 2}, each with its own empty design cache.
+
+OpenBLAS is built with DYNAMIC_ARCH in numpy's and scipy's wheels: the kernel it runs is chosen by CPU, and
+``OPENBLAS_CORETYPE`` forces the one another CPU would pick (SandyBridge: AVX without FMA; Haswell: AVX2 with
+FMA). The variables are set explicitly in each child's environment (an environment may set them already, e.g.
+``OPENBLAS_L2_SIZE`` for an older OpenBLAS on some CPUs; it is removed). The experiment is the quick paper
+scenario made shorter (a 3 s design, the hull alone) so that the four processes take seconds; the full-size
+figures are produced by ``benchmarks/blas_matrix.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+KERNELS = ("Haswell", "SandyBridge")
+THREADS = (1, 2)
+
+CHILD = """
+import json, sys
+import numpy as np
+from h4bench.scenarios.experiment import run_experiment
+from h4bench.scenarios.spec import load_spec
+from h4bench.fingerprint import platform
+spec = load_spec("paper", quick=True)
+spec["trajectory"]["duration"] = 3.0
+spec["estimators"]["methods"] = ["hull"]
+spec["estimators"]["wls"] = False
+spec["estimators"]["explain"] = False
+run = run_experiment(spec, 0)
+hull = run.boxes["hull"]
+print(json.dumps({"hashes": run.content_hashes, "lower": [float(v).hex() for v in hull.lower],
+                  "upper": [float(v).hex() for v in hull.upper],
+                  "enclosed": bool(np.all((hull.lower <= run.theta_true) & (run.theta_true <= hull.upper))),
+                  "kernels": sorted({b["kernel"] for b in platform()["blas"]}),
+                  "threads": sorted({b["threads"] for b in platform()["blas"]})}))
+"""
+
+
+def _child(kernel: str, threads: int, cache: Path) -> dict:
+    env = dict(os.environ, OPENBLAS_CORETYPE=kernel, OPENBLAS_NUM_THREADS=str(threads),
+               OMP_NUM_THREADS=str(threads), H4BENCH_CACHE=str(cache))
+    env.pop("OPENBLAS_L2_SIZE", None)
+    res = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, env=env, cwd=ROOT,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    settings = [(k, t) for k in KERNELS for t in THREADS]
+    root = tmp_path_factory.mktemp("blas")
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        out = list(pool.map(lambda s: _child(s[0], s[1], root / f"{s[0]}-{s[1]}"), settings))
+    return dict(zip(settings, out))
+
+
+def test_each_child_ran_the_kernel_and_threads_it_was_given(runs):
+    """The kernels must differ for the comparison to mean anything (SandyBridge is reported as 'Sandybridge')."""
+    for (kernel, threads), r in runs.items():
+        assert [k.lower() for k in r["kernels"]] == [kernel.lower()], (kernel, r["kernels"])
+        assert r["threads"] == [threads]
+
+
+def test_design_controller_dataset_and_hull_box_are_the_same_bits_everywhere(runs):
+    first = next(iter(runs.values()))
+    assert set(first["hashes"]) == {"trajectory", "controller", "feedforward", "dataset"}
+    for setting, r in runs.items():
+        assert r["hashes"] == first["hashes"], (setting, r["hashes"], first["hashes"])
+        assert (r["lower"], r["upper"]) == (first["lower"], first["upper"]), setting
+        assert r["enclosed"] is True, setting
