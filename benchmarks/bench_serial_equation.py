@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import statistics
 import sysconfig
 import tempfile
@@ -31,21 +30,10 @@ import numpy as np
 from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.robots.serial import SerialRobot
 from h4bench.ident.robots.serial_certified import certified_equation
+from h4bench.scenarios.arm_log import fixed_fingers_urdf
 
 COUNTS = 2**17
 DT = 1e-3
-
-
-def fixed_copy(urdf: Path, folder: Path) -> Path:
-    """The URDF with every prismatic joint turned into a fixed one (the certified equation needs revolute
-    joints only), written to ``folder``; the file itself when it has none."""
-    text = urdf.read_text()
-    fixed = re.sub(r'(<joint\b[^>]*\btype=")prismatic(")', r"\1fixed\2", text)
-    if fixed == text:
-        return urdf
-    out = folder / urdf.name
-    out.write_text(fixed)
-    return out
 
 
 def synthetic_log(robot: SerialRobot, seconds: float, seed: int = 0):
@@ -154,7 +142,7 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for urdf in urdfs:
-            rows += run(fixed_copy(urdf, Path(tmp)), args.seconds, args.kernels, args.stride, args.repeats,
+            rows += run(fixed_fingers_urdf(urdf, Path(tmp) / urdf.name), args.seconds, args.kernels, args.stride, args.repeats,
                         args.reference_repeats)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))

@@ -146,10 +146,12 @@ def write_arm_csv(log: ArmLog, path, spec_path=None, spec: dict | None = None) -
 
 def fixed_fingers_urdf(urdf, out) -> Path:
     """A copy of a URDF with every prismatic joint fixed (e.g. a gripper's fingers), so that the arm is a chain of
-    revolute joints; written to ``out``."""
+    revolute joints, written to ``out``; the URDF itself when it has no prismatic joint."""
     import re
 
     text = Path(urdf).read_text()
-    text = re.sub(r'(<joint\b[^>]*\btype=")prismatic(")', r"\1fixed\2", text)
-    Path(out).write_text(text)
+    fixed = re.sub(r'(<joint\b[^>]*\btype=")prismatic(")', r"\1fixed\2", text)
+    if fixed == text:
+        return Path(urdf)
+    Path(out).write_text(fixed)
     return Path(out)
