@@ -605,6 +605,29 @@ def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, ou
 
 
 @app.command()
+def export(
+    run_dir: Path = typer.Argument(..., help="a run folder written by h4bench run (e.g. runs/paper)"),
+    log_csv: Path = typer.Argument(..., help="the CSV to write (t,q1..q4,tau1..tau4; .gz: gzip-compressed)"),
+    spec: Optional[Path] = typer.Option(None, help="where the run's error specification goes (default spec.toml "
+                                        "beside the CSV)"),
+) -> None:
+    """Write a run's dataset as the CSV identify reads, with its true error specification (for identify --spec).
+
+    Then: h4bench identify LOG_CSV --spec SPEC. Refuses to replace a file h4bench did not write. Exit code 2: bad
+    run folder or target (one error line).
+    """
+    from h4bench.scenarios.export import export_run
+
+    try:
+        written = export_run(run_dir, log_csv, spec)
+    except (ValueError, OSError) as exc:
+        _fail(str(exc))
+    typer.echo(f"written: {written['csv']} ({written['rows']} rows, {written['seconds']:.3f} s), {written['spec']}")
+    typer.echo(f"next: h4bench identify {written['csv']} --spec {written['spec']}  (the truth: {run_dir}/result.json "
+               "\"true\")")
+
+
+@app.command()
 def replay(
     file: Path = typer.Argument(..., help="a replay.rrd written by h4bench run"),
     web: bool = typer.Option(False, "--web", help="serve the web viewer instead of the native one"),

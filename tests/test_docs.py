@@ -68,13 +68,10 @@ def test_key_paths_notation():
 
 
 @pytest.fixture(scope="module")
-def paper_result(tmp_path_factory):
+def paper_result(paper_quick_cli):
     import json
 
-    from h4bench.scenarios.runner import run_scenario
-
-    out = tmp_path_factory.mktemp("docs") / "paper"
-    run_scenario("paper", quick=True, out=out)
+    out, _ = paper_quick_cli
     return json.loads((out / "result.json").read_text())
 
 
