@@ -72,10 +72,13 @@ def _paper_figures(result: dict, seconds: float) -> dict:
 
 def _certified_figures(run_dir: Path, work: Path) -> dict:
     """``h4bench export`` of the run, then ``identify --spec``: the certified box against the run's truth."""
+    work.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "h4bench", "export", str(run_dir), str(work / "log.csv")], check=True,
-                   capture_output=True)
+    done = subprocess.run([sys.executable, "-m", "h4bench", "export", str(run_dir), str(work / "log.csv")],
+                          capture_output=True, text=True)
     t_export = time.perf_counter() - t0
+    if done.returncode != 0:
+        raise SystemExit(f"h4bench export failed (exit {done.returncode}): {done.stderr.strip()}")
     result, seconds = _h4bench("identify", str(work / "log.csv"), "--spec", str(work / "spec.toml"), "--out",
                                str(work / "identify"))
     run = json.loads((run_dir / "result.json").read_text())
