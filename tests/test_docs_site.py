@@ -47,6 +47,8 @@ def test_a_broken_link_fails_the_build(tmp_path):
 
     docs = tmp_path / "docs"
     shutil.copytree(ROOT / "docs", docs)
+    for folder in ("h4bench", "ident", "sim", "trajectories", "scenarios", "models", "data", "examples"):
+        (tmp_path / folder).symlink_to(ROOT / folder, target_is_directory=True)  # the sources the hook links
     (docs / "index.md").write_text((docs / "index.md").read_text() + "\n[gone](no-such-page.md)\n")
     config = (ROOT / "mkdocs.yml").read_text().replace("docs_dir: docs", f"docs_dir: {docs}").replace(
         "  - docs/hooks.py", f"  - {docs / 'hooks.py'}")

@@ -96,3 +96,25 @@ def test_export_refuses_a_file_it_did_not_write(exported, tmp_path):
 def test_export_needs_a_run_folder(tmp_path):
     res = CliRunner().invoke(app, ["export", str(tmp_path), str(tmp_path / "log.csv")])
     assert res.exit_code == 2 and "RUN_DIR" in res.output and not (tmp_path / "log.csv").exists()
+
+
+def test_a_certified_runs_own_error_model_is_exported(tmp_path):
+    """A run whose result.json holds its error_model (kind certified) exports that specification: read back by
+    ErrorSpec.from_toml it is the same entry for entry (a small hand-made run folder, no simulation)."""
+    from h4bench import sim
+    from h4bench.ident.processing.errorspec import ErrorSpec
+    from h4bench.scenarios.export import export_run
+
+    spec = ErrorSpec(n_joints=4, sample_period=1e-3, position_resolution=2 * np.pi / 20000, torque_error=1.3,
+                     qd_max=[7.0, 8.0, 9.0, 10.0], qdd_max=[300.0, 310.0, 320.0, 330.0], model_error=0.01,
+                     sources={"torque_error": 'the injected error\'s bound "noise.bound"'})
+    run = tmp_path / "run"
+    run.mkdir()
+    t = np.arange(50) * 1e-3
+    sim.Dataset(t, np.sin(t)[:, None] * np.ones(4), np.cos(t)[:, None] * np.ones(4), {"encoder_counts": 20000}).save(
+        run / "dataset")
+    (run / "result.json").write_text(json.dumps({"error_model": spec.to_dict(), "noise": {"bound": 1.3}}))
+    written = export_run(run, tmp_path / "log.csv", tmp_path / "em.toml")
+    back = ErrorSpec.from_toml(tmp_path / "em.toml", 4)
+    assert back.to_dict() == spec.to_dict() == written["error_model"]
+    assert tomllib.loads((tmp_path / "em.toml").read_text())["error_model"]["counts_per_turn"] == 20000
