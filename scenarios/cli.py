@@ -182,9 +182,11 @@ def _print_summary(result: dict) -> None:
 
 
 def _table1(result: dict):
-    """The paper's Table 1 beside h4bench's boxes (rich Table): parameter, truth, each guaranteed box of the run
-    (``in``: it holds the truth), the paper's box (Poignet, Ramdani & Vivas 2003, Table 1, the real H4) and the
-    width ratio hull / paper; None when the run has no box to show."""
+    """The paper's Table 1 beside h4bench's box (rich Table, fits 80 columns): parameter, truth, the exact hull's
+    box (``in``: it holds the truth; another guaranteed method's when the run has no hull), the paper's box
+    (Poignet, Ramdani & Vivas 2003, Table 1, the real H4, as printed there) and the width ratio box / paper
+    (``w/paper``);
+    None when the run has no box to show."""
     from rich import box as rbox
     from rich.markup import escape
     from rich.table import Table
@@ -195,30 +197,25 @@ def _table1(result: dict):
              if m.get("status") == "ok" and m.get("lower") and m.get("kind", "guaranteed") == "guaranteed"}
     if not boxes or not result.get("parameters"):
         return None
+    name = "hull" if "hull" in boxes else next(iter(boxes))
+    m = boxes[name]
     true = result.get("true") or [None] * len(result["parameters"])
-    table = Table(title="Table 1: guaranteed boxes beside the paper's (Poignet, Ramdani & Vivas 2003, the real H4)",
+    enc = m.get("enclosed")
+    table = Table(title=f"Table 1: the {escape(name)} box beside the paper's (Poignet, Ramdani & Vivas 2003)",
                   box=rbox.SIMPLE_HEAD, pad_edge=False)
-    table.add_column("parameter")
+    table.add_column("parameter", no_wrap=True)
     table.add_column("true", justify="right", no_wrap=True)
-    for name in boxes:
-        table.add_column(f"{escape(name)} box", justify="right", no_wrap=True)
-        table.add_column("in", justify="center")
-    table.add_column("paper Table 1", justify="right", no_wrap=True)
-    hull = boxes.get("hull")
-    if hull is not None:
-        table.add_column("hull / paper width", justify="right", no_wrap=True)
+    table.add_column(f"{escape(name)} box", justify="right", overflow="fold")
+    table.add_column("in", justify="center", no_wrap=True)
+    table.add_column("paper Table 1", justify="right", overflow="fold")
+    table.add_column("w/paper", justify="right", no_wrap=True)  # width over the paper box's
     for j, pname in enumerate(result["parameters"]):
-        row = [escape(str(pname)), _num(true[j])]
-        for m in boxes.values():
-            enc = m.get("enclosed")
-            row += [f"[{_num(m['lower'][j])}, {_num(m['upper'][j])}]",
-                    "-" if not enc else ("yes" if enc[j] else "[red]NO[/red]")]
         paper = PAPER_TABLE1.get(pname)
-        row.append(f"[{paper[0]}, {paper[1]}]" if paper else "-")  # as printed in the paper
-        if hull is not None:
-            width = hull["upper"][j] - hull["lower"][j]
-            row.append(_num(width / (paper[1] - paper[0])) if paper and paper[1] > paper[0] else "-")
-        table.add_row(*row)
+        width = m["upper"][j] - m["lower"][j]
+        table.add_row(escape(str(pname)), _num(true[j]), f"[{_num(m['lower'][j])}, {_num(m['upper'][j])}]",
+                      "-" if not enc else ("yes" if enc[j] else "[red]NO[/red]"),
+                      f"[{paper[0]}, {paper[1]}]" if paper else "-",  # as printed in the paper
+                      _num(width / (paper[1] - paper[0])) if paper and paper[1] > paper[0] else "-")
     return table
 
 
