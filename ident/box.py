@@ -67,4 +67,5 @@ class Box:
         return (self.lower <= theta) & (theta <= self.upper)
 
     def to_dict(self) -> dict:
+        """JSON-ready: ``{"names", "lower", "upper"}`` (lists; bounds in the parameters' units)."""
         return {"names": list(self.names), "lower": self.lower.tolist(), "upper": self.upper.tolist()}

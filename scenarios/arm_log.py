@@ -118,30 +118,16 @@ def arm_spec(log: ArmLog, *, qd_scale: float = 1.0, qdd_scale: float = 1.0) -> d
     }
 
 
-def _toml_value(v) -> str:
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return repr(float(v)) if isinstance(v, float) else str(v)
-
-
 def write_arm_csv(log: ArmLog, path, spec_path=None, spec: dict | None = None) -> None:
     """Write the log as the CSV ``identify`` reads (``t, q1..qn, tau1..taun``, full precision) and, with
     ``spec_path``, the specification as a TOML ``[error_model]`` table (``spec`` or :func:`arm_spec`)."""
+    from h4bench.scenarios.export import log_csv_text, spec_toml_text
     from h4bench.sim.dataset import atomic_write_bytes
 
-    N, n = log.q.shape
-    head = ",".join(["t"] + [f"q{i + 1}" for i in range(n)] + [f"tau{i + 1}" for i in range(n)])
-    body = np.column_stack([np.arange(N) * log.dt, log.q, log.tau])
-    lines = [head] + [",".join(repr(float(x)) for x in row) for row in body]
-    atomic_write_bytes(Path(path), ("\n".join(lines) + "\n").encode())
+    t = np.arange(log.q.shape[0]) * log.dt
+    atomic_write_bytes(Path(path), log_csv_text(t, log.q, log.tau).encode())
     if spec_path is not None:
-        table = spec if spec is not None else arm_spec(log)
-        out = ["[error_model]"]
-        out += [f"{k} = {_toml_value(v)}" for k, v in table.items() if k != "sources"]
-        out += ["", "[error_model.sources]"] + [f"{k} = {_toml_value(v)}" for k, v in table["sources"].items()]
-        atomic_write_bytes(Path(spec_path), ("\n".join(out) + "\n").encode())
+        atomic_write_bytes(Path(spec_path), spec_toml_text(spec if spec is not None else arm_spec(log)).encode())
 
 
 def fixed_fingers_urdf(urdf, out) -> Path:

@@ -182,6 +182,44 @@ def _print_summary(result: dict) -> None:
                           style="red", markup=False)
 
 
+def _table1(result: dict):
+    """The paper's Table 1 beside h4bench's box (rich Table, fits 80 columns): parameter, truth, the exact hull's
+    box (``in``: it holds the truth; another guaranteed method's when the run has no hull), the paper's box
+    (Poignet, Ramdani & Vivas 2003, Table 1, the real H4, as printed there) and the width ratio box / paper
+    (``w/paper``);
+    None when the run has no box to show."""
+    from rich import box as rbox
+    from rich.markup import escape
+    from rich.table import Table
+
+    from h4bench.scenarios.report import PAPER_TABLE1
+
+    boxes = {k: m for k, m in result.get("methods", {}).items()
+             if m.get("status") == "ok" and m.get("lower") and m.get("kind", "guaranteed") == "guaranteed"}
+    if not boxes or not result.get("parameters"):
+        return None
+    name = "hull" if "hull" in boxes else next(iter(boxes))
+    m = boxes[name]
+    true = result.get("true") or [None] * len(result["parameters"])
+    enc = m.get("enclosed")
+    table = Table(title=f"Table 1: the {escape(name)} box beside the paper's (Poignet, Ramdani & Vivas 2003)",
+                  box=rbox.SIMPLE_HEAD, pad_edge=False)
+    table.add_column("parameter", no_wrap=True)
+    table.add_column("true", justify="right", no_wrap=True)
+    table.add_column(f"{escape(name)} box", justify="right", overflow="fold")
+    table.add_column("in", justify="center", no_wrap=True)
+    table.add_column("paper Table 1", justify="right", overflow="fold")
+    table.add_column("w/paper", justify="right", no_wrap=True)  # width over the paper box's
+    for j, pname in enumerate(result["parameters"]):
+        paper = PAPER_TABLE1.get(pname)
+        width = m["upper"][j] - m["lower"][j]
+        table.add_row(escape(str(pname)), _num(true[j]), f"[{_num(m['lower'][j])}, {_num(m['upper'][j])}]",
+                      "-" if not enc else ("yes" if enc[j] else "[red]NO[/red]"),
+                      f"[{paper[0]}, {paper[1]}]" if paper else "-",  # as printed in the paper
+                      _num(width / (paper[1] - paper[0])) if paper and paper[1] > paper[0] else "-")
+    return table
+
+
 class _Progress:
     """A rich progress bar fed by the runner's progress(stage, done, total) calls."""
 
@@ -267,6 +305,12 @@ def run(
         typer.echo(_json_text(result))
     else:
         _print_summary(result)
+        if result.get("kind") in ("paper", "certified"):
+            from rich.console import Console
+
+            table = _table1(result)
+            if table is not None:
+                Console().print(table)
         typer.echo(f"written: {out or Path('runs') / result['scenario']}/")
     exit_if_contradicted(result)
     exit_if_certificate_failed(result)
@@ -618,6 +662,29 @@ def _identify_h4(file, bound, method, prior, prior_lower, prior_upper, model, ou
         raise OptionError(f"--torque-timing must be hold or sample, got {torque_timing!r}")
     return identify_csv(file, bounds, method=method, prior=box, model=model, out=out, torque_timing=torque_timing,
                         pairs=pairs, timeout=timeout)
+
+
+@app.command()
+def export(
+    run_dir: Path = typer.Argument(..., help="a run folder written by h4bench run (e.g. runs/paper)"),
+    log_csv: Path = typer.Argument(..., help="the CSV to write (t,q1..q4,tau1..tau4; .gz: gzip-compressed)"),
+    spec: Optional[Path] = typer.Option(None, help="where the run's error specification goes (default spec.toml "
+                                        "beside the CSV)"),
+) -> None:
+    """Write a run's dataset as the CSV identify reads, with its true error specification (for identify --spec).
+
+    Then: h4bench identify LOG_CSV --spec SPEC. Refuses to replace a file h4bench did not write. Exit code 2: bad
+    run folder or target (one error line).
+    """
+    from h4bench.scenarios.export import export_run
+
+    try:
+        written = export_run(run_dir, log_csv, spec)
+    except (ValueError, OSError) as exc:
+        _fail(str(exc))
+    typer.echo(f"written: {written['csv']} ({written['rows']} rows, {written['seconds']:.3f} s), {written['spec']}")
+    typer.echo(f"next: h4bench identify {written['csv']} --spec {written['spec']}  (the truth: {run_dir}/result.json "
+               "\"true\")")
 
 
 @app.command()

@@ -1,6 +1,6 @@
 """``h4bench identify``: the estimators on a user's own log (CSV), with the same result.json as a scenario.
 
-Inputs a user with a datasheet has (formats documented in README.md, "identify: priors and bounds"):
+Inputs a user with a datasheet has (formats documented in docs/commands.md, "identify: priors and bounds"):
 
 - the bound on ``|tau - W theta|`` for every raw sample [N m]: one number for all joints, four numbers
   ``b1,b2,b3,b4`` (one per joint), or a file: TOML ``joint1 = 1.2`` ... ``joint4 = 1.0``, or CSV with the header

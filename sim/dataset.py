@@ -144,9 +144,11 @@ class Dataset:
         return self.t.size
 
     def slice(self, start: int, stop: int) -> "Dataset":
+        """Samples ``start:stop`` (a Python slice of the rows) with a copy of the metadata."""
         return Dataset(self.t[start:stop], self.q[start:stop], self.tau[start:stop], dict(self.metadata))
 
     def save(self, path) -> Path:
+        """Write ``<stem>.npz`` (t, q, tau) and ``<stem>.json`` (metadata), each atomically; returns the .npz path."""
         stem = _stem(path)
         _save_npz(stem.with_suffix(".npz"), {"t": self.t, "q": self.q, "tau": self.tau})
         atomic_write_bytes(stem.with_suffix(".json"), json.dumps(self.metadata, indent=2, default=json_default).encode())
@@ -193,6 +195,7 @@ class GroundTruth:
     _ARRAYS = ("theta", "q", "qd", "qdd", "x", "xdd", "tau_applied", "noise", "loop_violation")
 
     def save(self, path) -> Path:
+        """Write ``<stem>.npz`` (every array, h and the parameter names) atomically; returns its path."""
         stem = _stem(path)
         arrays = {k: getattr(self, k) for k in self._ARRAYS}
         arrays["h"] = np.array(self.h)

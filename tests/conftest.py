@@ -133,3 +133,17 @@ def run_experiment(model, geometry, seconds=3.0, noise=None, seed=0, encoder_cou
     ff = ident.inverse_dynamics(geometry, NOMINAL, ref.q, ref.qd, ref.qdd)
     return ref, *sim.simulate(model, ref, noise=noise, controller=controller, feedforward=ff, seed=seed,
                               settings=sim.SimulationSettings(encoder_counts=encoder_counts))
+
+
+@pytest.fixture(scope="session")
+def paper_quick_cli(tmp_path_factory):
+    """``h4bench run paper --quick`` through the command line (CliRunner, 200 columns), once per session: the run
+    folder (Path) and the terminal output (str). Shared by the docs schema test and the export tests."""
+    from typer.testing import CliRunner
+
+    from h4bench.scenarios.cli import app
+
+    out = tmp_path_factory.mktemp("paper-quick") / "paper"
+    res = CliRunner().invoke(app, ["run", "paper", "--quick", "--out", str(out)], env={"COLUMNS": "200"})
+    assert res.exit_code == 0, res.output
+    return out, res.output

@@ -68,13 +68,10 @@ def test_key_paths_notation():
 
 
 @pytest.fixture(scope="module")
-def paper_result(tmp_path_factory):
+def paper_result(paper_quick_cli):
     import json
 
-    from h4bench.scenarios.runner import run_scenario
-
-    out = tmp_path_factory.mktemp("docs") / "paper"
-    run_scenario("paper", quick=True, out=out)
+    out, _ = paper_quick_cli
     return json.loads((out / "result.json").read_text())
 
 
@@ -143,3 +140,40 @@ def test_the_estimators_table_is_the_registrys():
     table = registry.claims_table()
     assert table.count("\n") == len(registry.BUILTINS) + 1
     assert table in (DOCS / "estimators.md").read_text(), "regenerate the table: registry.claims_table()"
+
+
+PUBLIC = ("h4bench.ident", "h4bench.sim", "h4bench.trajectories", "h4bench.scenarios.export", "h4bench.scenarios.arm_log")
+
+
+def public_objects():
+    """``(qualified name, object)`` of every function and class in the ``__all__`` of the documented packages
+    (the API reference of the site, docs/api/*.md), and of every public method those classes define."""
+    import importlib
+    import inspect
+
+    for package in PUBLIC:
+        mod = importlib.import_module(package)
+        for name in mod.__all__:
+            obj = getattr(mod, name)
+            if not (inspect.isclass(obj) or inspect.isfunction(obj)):
+                continue
+            yield f"{package}.{name}", obj
+            if inspect.isclass(obj):
+                for attr, member in vars(obj).items():
+                    if not attr.startswith("_") and inspect.isfunction(member):
+                        yield f"{package}.{name}.{attr}", member
+
+
+def test_every_public_function_has_a_docstring():
+    names = [name for name, _ in public_objects()]
+    assert len(names) > 100  # the four packages' public names and their methods
+    missing = [name for name, obj in public_objects() if not (obj.__doc__ or "").strip()]
+    assert not missing, f"public functions and classes without a docstring: {missing}"
+
+
+def test_the_docstring_check_can_fail(monkeypatch):
+    """The check above sees a public function whose docstring is removed."""
+    from h4bench.ident import box
+
+    monkeypatch.setattr(box.Box.to_dict, "__doc__", None)
+    assert "h4bench.ident.Box.to_dict" in [name for name, obj in public_objects() if not (obj.__doc__ or "").strip()]

@@ -52,6 +52,7 @@ class WLSResult:
     cov: np.ndarray | None = None
 
     def to_dict(self) -> dict:
+        """JSON-ready: every field (arrays as lists: the estimate, its standard deviations, the per-joint sigma, ...)."""
         return {
             "names": list(self.names),
             "theta": self.theta.tolist(),

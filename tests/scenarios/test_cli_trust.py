@@ -135,6 +135,7 @@ def test_a_campaign_checks_its_model_first(tmp_path):
     _one_error_line(res, "--model does not apply to kind 'tx40'", "pendulum.xml")
 
 
+@pytest.mark.slow  # the default run keeps tests/sim/test_model_roundtrip.py (the same files: loops, truth, dynamics)
 def test_a_model_saved_by_mujoco_runs_the_paper_scenario(tmp_path):
     """MjSpec -> to_xml (6 significant digits): the loops are closed at load; the truth is still enclosed."""
     saved = tmp_path / "edited.xml"
