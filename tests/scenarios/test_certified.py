@@ -213,7 +213,7 @@ def test_identify_h4_refuses_an_understated_motion_bound(run_and_spec, tmp_path,
 
 
 @pytest.mark.parametrize("table, words", [
-    ("kernel_steps = 7", ["kernel_steps must be >= 20", "leave every parameter at its prior"]),
+    ("kernel_steps = 7", ["kernel_steps must be >= 20", "left every parameter at its prior"]),
     ("kernel_shape = 'box'", ["kernel_shape must be one of"]),
     ("stride = 0", ["stride must be an integer >= 1"]),
     ("curvature_every = 0", ["curvature_every must be an integer >= 1"]),
