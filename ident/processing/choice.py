@@ -36,9 +36,10 @@ __all__ = ["KernelFamily", "LONGEST_S", "MIN_KERNEL_STEPS", "SHORTEST_S", "STRID
 
 # The shortest kernel [sample steps]. The encoder error enters every acceleration column through the kernel's slope
 # (summation by parts): about 8 pi e / (L h)^2 per unit parameter for a Hann kernel of L steps, and the nacelle
-# columns' through their gradients likewise. Measured on `certified --quick` (seed 0, 20 000 counts): kernels of 7, 14
-# and 20 steps leave every one of the H4's 14 parameters at the prior; 40 steps gives a box 1.09x the tuned hull's
-# (benchmarks/certified_kernels.py). Shorter kernels are refused.
+# columns' through their gradients likewise. Measured with `identify --spec` on the first 1.5 s of the `certified
+# --quick` log (seed 0, 20 000 counts, prior [0, 2]): kernels of 7, 14, 20 and 30 steps left all 14 of the H4's
+# parameters at the prior, 50 steps 12, 100 steps 10; on the whole 4 s log 40 steps gives a box 1.09x the tuned
+# hull's (benchmarks/certified_kernels.py). Shorter kernels are refused.
 MIN_KERNEL_STEPS = 40
 SHORTEST_S = 0.04  # [s] the family's shortest kernel
 LONGEST_S = 0.8  # [s] the family's longest kernel (and at most a tenth of the log)
