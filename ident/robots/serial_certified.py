@@ -83,6 +83,7 @@ from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 __all__ = ["SERIAL_FAMILY", "CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "certified_family",
            "check_motion_bounds", "geometry_bounds", "secant_span"]
 
+RADII_GROW = 1.0 + 2.0**-40  # outward margin on the inertial radii's float sums (>= (1 + u)^4000)
 TERMS = ("position", "motion", "coulomb", "float", "torque", "model", "rounding")  # regressor side, then torque side
 
 
@@ -277,8 +278,10 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     Dcou = np.zeros((R_, nj, p))
     ni = 10 * nj
     Wc[:, :, :ni] = Wi
+    # the parts are sums of products of non-negative floats rounded to nearest (per step, then over the window):
+    # each is within (1 + u)^k of its exact value for a chain of k operations; RADII_GROW covers k up to 4000
     for name in PARTS:
-        parts_i[name] = up(parts_i[name] * mask[None])
+        parts_i[name] = up(parts_i[name] * mask[None] * RADII_GROW)
     Dpos[:, :, :ni] = sum(parts_i[nm] for nm in PARTS if nm.endswith("position"))
     Dmot[:, :, :ni] = sum(parts_i[nm] for nm in PARTS if nm.endswith("motion"))
     col = ni

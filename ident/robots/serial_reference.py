@@ -92,14 +92,16 @@ class _Steps(StepGrid):
         absJv = np.abs(Jv)
         absG = np.abs(gam)
         mot = self.ev_mot_max
-        Q_all = np.einsum("abic,a,b->ic", absG, ev_max, ev_max)
         Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
         dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
         rem = (4 * (geo["gamma"] * float(sp.sum()) ** 2 + geo["g"]) * dqs * dqs
                + np.einsum("kaic,k,a->ic", dJvB, dq_max, ev_max) + 2 * geo["gamma"] * dvs * dvs * dqs)
         H_mot = (np.einsum("kic,k->ic", JqB, dq_mean) + np.einsum("aic,a->ic", absJv, self.ev_mot_mean) + Q_mm + rem)
         # the speed estimate's measurement error enters through the row's exact gradient (window loop, "Jv")
-        H_pos = np.einsum("kic,k->ic", JqB, ebar) + (Q_all - Q_mm)
+        pos = self.ev_pos[j]  # Q_all - Q_mm as a sum of non-negative products (no cancellation)
+        Q_pos = (np.einsum("abic,a,b->ic", absG, mot, pos) + np.einsum("abic,a,b->ic", absG, pos, mot)
+                 + np.einsum("abic,a,b->ic", absG, pos, pos))
+        H_pos = np.einsum("kic,k->ic", JqB, ebar) + Q_pos
         # |M(true mid) - M(qh)| per column b
         dlt = np.einsum("kbic,k->bic", dMB, ebar) + 2 * geo["M"] * float(ebar.sum()) ** 2
         out = {"g0": g0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "H_pos": H_pos,

@@ -182,14 +182,18 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     # (h + g)(q(t), qd(t)) against (h + g)(qh, vh) (the reference's comments)
     absG = np.abs(gam)
     mot = grid.ev_mot_max
-    Q_all = np.einsum("sabic,sa,sb->sic", absG, ev_max, ev_max)
     Q_mm = np.einsum("sabic,a,b->sic", absG, mot, mot)
     dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
     rem = ((4 * (geo["gamma"] * np.sum(sp, axis=1) ** 2 + geo["g"]) * dqs * dqs)[c3]
            + np.einsum("skaic,sk,sa->sic", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
     H_mot = (np.einsum("skic,sk->sic", JqB, dq_mean) + np.einsum("saic,a->sic", np.abs(Jv), grid.ev_mot_mean)
              + Q_mm + rem)
-    H_pos = np.einsum("skic,sk->sic", JqB, ebar) + (Q_all - Q_mm)
+    # Q_all - Q_mm without the cancellation: ev_max = mot + ev_pos, so the difference is a sum of non-negative
+    # products (|G| mot ev_pos twice and |G| ev_pos ev_pos)
+    pos = grid.ev_pos[J]
+    Q_pos = (np.einsum("sabic,a,sb->sic", absG, mot, pos) + np.einsum("sabic,sa,b->sic", absG, pos, mot)
+             + np.einsum("sabic,sa,sb->sic", absG, pos, pos))
+    H_pos = np.einsum("skic,sk->sic", JqB, ebar) + Q_pos
     dlt = np.einsum("skbic,sk->sbic", dMB, ebar) + (2 * geo["M"] * np.sum(ebar, axis=1) ** 2)[c4]
     e = grid.e
     return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot,
