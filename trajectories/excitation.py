@@ -115,9 +115,10 @@ def cache_key(inputs: dict) -> str:
 
 
 def content_hash(traj: Trajectory) -> str:
-    """SHA-256 of a trajectory's arrays (dtype, shape, bytes) and of its check report (JSON)."""
+    """SHA-256 of a trajectory's arrays (dtype, shape, bytes) and of its check report (JSON; null for a
+    reference without one)."""
     return array_digest([(name, getattr(traj, name)) for name in ("t", "x", "q", "qd", "qdd")],
-                        json.dumps(traj.checks, sort_keys=True, default=str).encode())
+                        json.dumps(getattr(traj, "checks", None), sort_keys=True, default=str).encode())
 
 
 def _load_valid(path: Path, key: str, inputs: dict, geometry, limits, theta) -> Trajectory | None:
