@@ -34,7 +34,8 @@ _PROCESSING_KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "cu
 
 
 def read_processing(path) -> Processing:
-    """The optional ``[certified]`` table of a spec file: ``kernel_steps`` (>= ``MIN_KERNEL_STEPS``),
+    """The optional ``[certified]`` table of a spec file: ``kernel_steps`` (>= ``MIN_KERNEL_STEPS``; 0 or absent: the
+    rows of every kernel of :func:`ident.processing.choice.kernel_family`),
     ``kernel_shape`` (``hann`` or ``triangle``), ``stride`` and ``curvature_every`` (>= 1). Errors name ``--spec``,
     the file and the key."""
     from h4bench.scenarios.identify import OptionError
@@ -54,6 +55,8 @@ def read_processing(path) -> Processing:
         kind = _PROCESSING_KEYS[key]
         if isinstance(value, bool) or not isinstance(value, kind):
             raise OptionError(f"--spec {path}: [certified] {key} must be {kind.__name__}, got {value!r}")
+    if table.get("kernel_steps") == 0:  # 0: every kernel of the family, as in the scenarios' [certified] tables
+        table = {**table, "kernel_steps": None}
     try:
         return Processing(**table)
     except ValueError as exc:  # Processing's messages start with the key
