@@ -45,10 +45,22 @@ def _minors(a):
 _PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
 
 
+def _det(s, c):
+    return s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
+
+
 def det4(a) -> np.ndarray:
     """Determinants (...,) of 4 x 4 matrices a (..., 4, 4) (Laplace expansion on the 2 x 2 minors)."""
-    s, c = _minors(np.asarray(a, float))
-    return s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
+    return _det(*_minors(np.asarray(a, float)))
+
+
+# The adjugate by Laplace expansion on the 2 x 2 minors: entry (i, j) is (-1)^(i + j) times
+# a[r, k0] M[n0] - a[r, k1] M[n1] + a[r, k2] M[n2], with r = _ADJ_ROWS[j], M the minors of the row pair that does not
+# hold r (the bottom pair c for r in {0, 1}, the top pair s for r in {2, 3}), (k0, k1, k2) the columns other than i
+# and (n0, n1, n2) the minors on the columns other than i and each k.
+_ADJ_ROWS = (1, 0, 3, 2)
+_ADJ_COLS = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
+_ADJ_MINORS = ((5, 4, 3), (5, 2, 1), (4, 2, 0), (3, 1, 0))
 
 
 def solve4(a, b) -> np.ndarray:
@@ -56,25 +68,13 @@ def solve4(a, b) -> np.ndarray:
     the adjugate over the determinant (a singular a gives inf or nan, never an exception)."""
     a = np.asarray(a, float)
     s, c = _minors(a)
-    det = s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
-    m = lambda r, i: a[..., r, i]  # noqa: E731
+    det = _det(s, c)
     adj = np.empty(a.shape)
-    adj[..., 0, 0] = m(1, 1) * c[5] - m(1, 2) * c[4] + m(1, 3) * c[3]
-    adj[..., 0, 1] = -m(0, 1) * c[5] + m(0, 2) * c[4] - m(0, 3) * c[3]
-    adj[..., 0, 2] = m(3, 1) * s[5] - m(3, 2) * s[4] + m(3, 3) * s[3]
-    adj[..., 0, 3] = -m(2, 1) * s[5] + m(2, 2) * s[4] - m(2, 3) * s[3]
-    adj[..., 1, 0] = -m(1, 0) * c[5] + m(1, 2) * c[2] - m(1, 3) * c[1]
-    adj[..., 1, 1] = m(0, 0) * c[5] - m(0, 2) * c[2] + m(0, 3) * c[1]
-    adj[..., 1, 2] = -m(3, 0) * s[5] + m(3, 2) * s[2] - m(3, 3) * s[1]
-    adj[..., 1, 3] = m(2, 0) * s[5] - m(2, 2) * s[2] + m(2, 3) * s[1]
-    adj[..., 2, 0] = m(1, 0) * c[4] - m(1, 1) * c[2] + m(1, 3) * c[0]
-    adj[..., 2, 1] = -m(0, 0) * c[4] + m(0, 1) * c[2] - m(0, 3) * c[0]
-    adj[..., 2, 2] = m(3, 0) * s[4] - m(3, 1) * s[2] + m(3, 3) * s[0]
-    adj[..., 2, 3] = -m(2, 0) * s[4] + m(2, 1) * s[2] - m(2, 3) * s[0]
-    adj[..., 3, 0] = -m(1, 0) * c[3] + m(1, 1) * c[1] - m(1, 2) * c[0]
-    adj[..., 3, 1] = m(0, 0) * c[3] - m(0, 1) * c[1] + m(0, 2) * c[0]
-    adj[..., 3, 2] = -m(3, 0) * s[3] + m(3, 1) * s[1] - m(3, 2) * s[0]
-    adj[..., 3, 3] = m(2, 0) * s[3] - m(2, 1) * s[1] + m(2, 2) * s[0]
+    for i, ((k0, k1, k2), (n0, n1, n2)) in enumerate(zip(_ADJ_COLS, _ADJ_MINORS)):
+        for j, r in enumerate(_ADJ_ROWS):
+            M = c if r < 2 else s
+            t = a[..., r, k0] * M[n0] - a[..., r, k1] * M[n1] + a[..., r, k2] * M[n2]
+            adj[..., i, j] = t if (i + j) % 2 == 0 else -t  # negation is exact: the same bits as -x + y - z
     b = np.asarray(b, float)
     with np.errstate(divide="ignore", invalid="ignore"):
         if b.ndim == a.ndim - 1:
