@@ -96,16 +96,13 @@ def _certified_figures(run_dir: Path, work: Path) -> dict:
                 len(true) // 2]}
 
 
-def _arm_figures(seconds_log: float, work: Path) -> dict | None:
-    """The own-arm example (examples/own_arm/run.py) on a log of ``seconds_log``; None without the UR5's URDF."""
+def _arm_figures(seconds_log: float, work: Path) -> dict:
+    """The own-arm example (examples/own_arm/run.py) on a log of ``seconds_log``."""
     t0 = time.perf_counter()
     done = subprocess.run([sys.executable, str(ROOT / "examples" / "own_arm" / "run.py"), "--seconds",
                            str(seconds_log), "--out", str(work / f"arm-{seconds_log:g}")], capture_output=True,
                           text=True)
     if done.returncode != 0:
-        if "example-robot-data" in done.stderr:
-            print("skipped the arm example: pip install example-robot-data", file=sys.stderr)
-            return None
         raise SystemExit(f"examples/own_arm/run.py failed:\n{done.stderr[-2000:]}")
     read = json.loads(done.stdout)
     read.update(command=f"python examples/own_arm/run.py --seconds {seconds_log:g}", log_seconds=seconds_log,

@@ -42,9 +42,6 @@ def test_the_arm_spec_is_the_logs_truth():
     pytest.importorskip("pinocchio")
     run = _load(ROOT / "examples" / "own_arm" / "run.py")
     urdf = run.ur5_urdf()
-    if urdf is None:
-        pytest.skip("example-robot-data is not installed (pip install example-robot-data: a 131 MB wheel of many "
-                    "robots' meshes, so not in the test extra)")
     import numpy as np
 
     from h4bench.ident.robots.serial import SerialRobot
@@ -62,9 +59,6 @@ def test_the_arm_spec_is_the_logs_truth():
 def _own_arm(tmp_path, seconds: float) -> dict:
     pytest.importorskip("pinocchio")
     run = _load(ROOT / "examples" / "own_arm" / "run.py")
-    if run.ur5_urdf() is None:
-        pytest.skip("example-robot-data is not installed (pip install example-robot-data: a 131 MB wheel of many "
-                    "robots' meshes, so not in the test extra)")
     return run.main(["--seconds", str(seconds), "--out", str(tmp_path)])
 
 

@@ -1,6 +1,5 @@
 """A worked example for your own arm: the certified box of a UR5 log under a specification written from data sheets.
 
-    pip install example-robot-data          # the UR5's URDF (about 130 MB: many robots' meshes)
     python examples/own_arm/run.py [--seconds 12] [--out runs/own-arm]
 
 What it does, as you would with your own robot:
@@ -22,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
-import site
 import subprocess
 import sys
 from pathlib import Path
@@ -30,16 +28,12 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-UR5 = "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
+UR5 = HERE / "ur5.urdf"  # the UR5's URDF of example-robot-data 6.0.0, unchanged (SOURCE.md: origin and licence)
 
 
-def ur5_urdf() -> Path | None:
-    """The UR5's URDF of the example-robot-data package, or None when it is not installed."""
-    for root in [*site.getsitepackages(), site.getusersitepackages()]:
-        p = Path(root) / UR5
-        if p.is_file():
-            return p
-    return None
+def ur5_urdf() -> Path:
+    """The UR5's URDF shipped beside this script."""
+    return UR5
 
 
 def make_log(urdf: Path, out: Path, seconds: float, seed: int = 0) -> np.ndarray:
@@ -82,8 +76,6 @@ def main(argv=None) -> dict:
     ap.add_argument("--spec", type=Path, default=HERE / "spec.toml", help="the specification (default: beside this)")
     args = ap.parse_args(argv)
     urdf = ur5_urdf()
-    if urdf is None:
-        sys.exit("the UR5's URDF was not found: pip install example-robot-data")
     args.out.mkdir(parents=True, exist_ok=True)
     truth = make_log(urdf, args.out, args.seconds)
     cmd = [sys.executable, "-m", "h4bench", "identify", str(args.out / "log.csv"), "--urdf", str(urdf),

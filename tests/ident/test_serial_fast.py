@@ -2,8 +2,8 @@
 
 Oracle: :func:`ident.robots.serial_reference.inertial_rows_reference` (``certified_equation(..., reference=True)``):
 one pinocchio regressor call per (window, step) pair and the per-step bounds one step at a time, on the same logs.
-Robots: the TX40 (coupled wrist) synthetic log of ``test_serial_certified`` and a UR5 (``data/ur5_robot.urdf``, the
-example-robot-data URDF without meshes) on the same analytic sum-of-sines motion; for the UR5 also the soundness
+Robots: the TX40 (coupled wrist) synthetic log of ``test_serial_certified`` and a UR5 (``examples/own_arm/ur5.urdf``, the
+example-robot-data URDF, its meshes not read) on the same analytic sum-of-sines motion; for the UR5 also the soundness
 certificate against the true rows (Gauss-Legendre quadrature of the analytic motion).
 
 Tolerances, from the a-priori error bounds of the two computations (u = 2^-53):
@@ -37,7 +37,7 @@ from h4bench.ident.robots.serial_steps import PARTS, inertial_rows
 from tests.ident.test_serial_certified import COUNTS, DT, H, _log, _trajectory, _true_rows
 
 U = 2.0**-53
-UR5 = Path(__file__).parent / "data" / "ur5_robot.urdf"
+UR5 = Path(__file__).parents[2] / "examples" / "own_arm" / "ur5.urdf"
 
 
 @pytest.fixture(scope="module")
