@@ -25,7 +25,8 @@ from typer.testing import CliRunner
 from h4bench import ident
 from h4bench import sim
 from h4bench.scenarios import registry
-from h4bench.scenarios.cli import _num, app
+from h4bench.scenarios.cli import app
+from h4bench.scenarios.cli_output import num as _num
 from h4bench.scenarios.spec import available
 
 ROOT = Path(__file__).resolve().parents[2]

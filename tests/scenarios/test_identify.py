@@ -24,7 +24,8 @@ from h4bench import sim
 from h4bench.ident.processing.filtering import ProcessingSettings, derivatives, exclude_low_speed, parallel_filter
 from h4bench.ident.robots.h4_equation import build_equation
 from h4bench.ident.robots.h4 import regressor
-from h4bench.scenarios.cli import _print_summary, app
+from h4bench.scenarios.cli import app
+from h4bench.scenarios.cli_output import print_summary as _print_summary
 from h4bench.scenarios.spec import DEFAULTS
 
 HEADER = "t,q1,q2,q3,q4,tau1,tau2,tau3,tau4"
@@ -294,7 +295,7 @@ def test_summary_fits_the_terminal(monkeypatch, capsys, columns):
 
 
 def test_number_format_is_short_and_exact_to_4_digits():
-    from h4bench.scenarios.cli import _num
+    from h4bench.scenarios.cli_output import num as _num
 
     for x in (3.770e-4, -1.234e-9, 0.06074, 12.35, 1234.5, 9.99e7, 0.0, -0.5, 123456.0):
         s = _num(x)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 
-from h4bench.scenarios.cli import _num
+from h4bench.scenarios.cli_output import num as _num
 
 
 def test_run_paper_prints_table1_beside_the_boxes(paper_quick_cli):
@@ -34,7 +34,7 @@ def test_table1_fits_80_columns(paper_quick_cli):
     """In an 80-column terminal every row keeps its parameter, its box and the paper's box whole."""
     from rich.console import Console
 
-    from h4bench.scenarios.cli import _table1
+    from h4bench.scenarios.cli_output import table1 as _table1
     from h4bench.scenarios.report import PAPER_TABLE1
 
     run_dir, _ = paper_quick_cli
