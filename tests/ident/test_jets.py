@@ -197,17 +197,23 @@ def test_taylor_models_in_tau_enclose_every_tau_and_keep_the_linear_part():
     assert np.max(prod.r) < 0.05 * np.max(np.abs(prod.a))  # the tau-dependence is carried, not widened
 
 
+def _tube_jets(geometry, seed, h, beta_q, beta_v):
+    """Six fast states (8 rad/s: a 4e-3 rad half-step), their tubes q + (v h / 2) tau +- beta_q, v +- beta_v and
+    box_jets' Hessian bounds over them (every tube verified)."""
+    q, v = _poses(geometry, 6, seed)
+    v = v * 4
+    V = MR(v, np.full_like(v, beta_v))
+    x_hat = forward_kinematics(geometry, q)
+    GP, HP, GF, HF, proven = box_jets(geometry, MR(q, np.full_like(q, beta_q), v * h / 2), V, x_hat)
+    assert proven.all()
+    return q, v, V, x_hat, HP, HF
+
+
 def test_motion_tube_hessians_bound_the_hessians_along_the_tube(geometry):
     """A Taylor-model tube q_m + (v h / 2) tau +- beta: the Hessian bounds hold at points anywhere along it, where a
     plain box over the same span could not even be verified."""
-    q, v = _poses(geometry, 6, 12)
-    v = v * 4  # fast motion: 8 rad/s, a 4e-3 rad half-step
     h, beta_q, beta_v = 1e-3, 3e-4, 0.5
-    Q = MR(q, np.full_like(q, beta_q), v * h / 2)
-    V = MR(v, np.full_like(v, beta_v))
-    x_hat = forward_kinematics(geometry, q)
-    GP, HP, GF, HF, proven = box_jets(geometry, Q, V, x_hat)
-    assert proven.all()
+    q, v, V, x_hat, HP, HF = _tube_jets(geometry, 12, h, beta_q, beta_v)
     rng = np.random.default_rng(13)
     for _ in range(4):
         tau = rng.uniform(-1, 1, (6, 1))
@@ -247,14 +253,8 @@ def test_wide_tube_hessian_bounds_hold_and_stay_near_the_sampled_ones(geometry):
     random states inside (central differences of the enclosed point gradients) and the F bounds' sum over the
     Hessian is within 1000 times the largest sampled one's (measured at this commit: median 140 with sub-boxes
     split 2 per joint, about 1.2e7 without them, h4_jets.SPLIT = 0)."""
-    q, v = _poses(geometry, 6, 23)
-    v = v * 4
     h, beta_q, beta_v = 1e-3, 1.7e-3, 2.0
-    Q = MR(q, np.full_like(q, beta_q), v * h / 2)
-    V = MR(v, np.full_like(v, beta_v))
-    x_hat = forward_kinematics(geometry, q)
-    GP, HP, GF, HF, proven = box_jets(geometry, Q, V, x_hat)
-    assert proven.all()
+    q, v, _, _, HP, HF = _tube_jets(geometry, 23, h, beta_q, beta_v)
     rng = np.random.default_rng(24)
     seen = np.zeros_like(HF)
     for _ in range(4):
