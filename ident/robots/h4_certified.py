@@ -14,8 +14,7 @@ What is proven and what is not (``CertifiedEquation.info["not_proven"]``): every
 the interval jets of :mod:`ident.robots.h4_jets` verify each step's boxes: the values and gradients of P and F at
 the measured secant states, their gradients and second derivatives over each step's ENCODER box (the encoder's
 second-order term, and the transfer of the gradients to the true secant state) and their second derivatives over
-each step's MOTION (the truncation's second-order remainder; one evaluation bounds both, the encoder box lying
-inside the motion tube), the latter as a Taylor model along the step (a tube
+each step's MOTION (the truncation's second-order remainder), the latter as a Taylor model along the step (a tube
 ``q_m + (v h / 2) tau`` with a small box around it; a plain box over the same span fails the pose test on about
 half of the steps of ``certified --quick``). A step whose box cannot be verified falls back to second-derivative
 bounds SAMPLED along the measured motion (central differences at every ``curvature_every``-th step, local maximum
@@ -276,15 +275,15 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
     def evaluate(a, b):  # rigorous values and gradients at the measured secant states
         return point_jets(geometry, a, b, pose)
 
-    # Per step, two sets of boxes (module docstring); a step whose box cannot be verified falls back to the sampled
-    # bounds (listed in not_proven):
+    # Per step, two sets of boxes, each enclosed by interval jets (module docstring); a step whose box cannot be
+    # verified falls back to the sampled bounds (listed in not_proven):
     # * the encoder box: the measured secant state +- the position error's effect (e_m, e_v);
     # * the motion tube: q_m + (v h / 2) tau +- (e_m + e_v h / 2 + qdd_max h^2 / 8) for tau in [-1, 1] (a Taylor
     #   model in tau), v +- (e_v + qdd_max h / 2): every true state of the step and every point between it and
     #   the true secant state (chord remainder qdd_max h^2 / 8, speed within qdd_max h / 2 of the secant's).
-    # The encoder box lies in the motion tube (its tau = 0 slice, radii rounded up from the encoder box's), so
-    # ONE evaluation of interval jets over the tubes bounds both (a little wider over the encoder box than jets
-    # over the box itself would: width/tuned 0.9641 -> 0.9717 on certified --quick seed 0, at a third less time).
+    # (The encoder box lies in the motion tube, so the tube's jets would bound it too, in about half the time of
+    # the two evaluations; but over the tube the encoder's bounds are 2-5 times wider at 20000 counts per turn
+    # (width/tuned 0.9641 -> 0.9717 on certified --quick seed 0) and 3 more parameters stay at the prior at 4096.)
     u = 2.0**-53
     qddm = np.asarray(spec.qdd_max, dtype=float)
     em, ev = up(0.5 * (e[:-1] + e[1:])), up((e[:-1] + e[1:]) / h)
@@ -293,9 +292,9 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
     a_tube = vm * (h / 2)
     q_tube = MR(qm, up(em_box + up(ev_box * (h / 2)) + up(qddm * (h * h / 8)) + 4 * u * np.abs(a_tube)), a_tube)
     v_tube = MR(vm, up(ev_box + up(qddm * (h / 2))))
-    GPm, HPm, GFm, HFm, proven_m = _motion_jets(geometry, q_tube, v_tube, pose, motion)
+    HPm, HFm, proven_m = _motion_jets(geometry, q_tube, v_tube, pose, motion)
     if np.any(e):
-        GP, HP, GF, HF, proven = GPm, HPm.copy(), GFm, HFm.copy(), proven_m.copy()
+        GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, em_box), MR(vm, ev_box), pose)
     else:  # exact positions (the certificate's truth equation): no encoder term, nothing to bound
         GP, GF = np.full((qm.shape[0], 4, 2, 8), np.inf), np.full((qm.shape[0], 4, 2, 8), np.inf)
         HP, HF = np.zeros((qm.shape[0], 4, 2, 8, 8)), np.zeros((qm.shape[0], 4, 2, 8, 8))
@@ -315,19 +314,17 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
 
 
 def _motion_jets(geometry, q_tube: MR, v_tube: MR, pose, motion: MotionBounds | None):
-    """(GP, GF, HP, HF, proven) over the motion tubes (S, 4) (:func:`ident.robots.h4_jets.box_jets`'s): on the
-    steps whose tubes ``motion`` covers its second-derivative bounds (and no gradient bound: +inf), the interval
-    jets on the others."""
+    """(HP, HF, proven) over the motion tubes (S, 4): ``motion``'s bounds on the steps whose tubes it covers, the
+    interval jets (:func:`ident.robots.h4_jets.box_jets`) on the others."""
     reuse = np.zeros(q_tube.shape[0], dtype=bool) if motion is None else motion.covers(q_tube, v_tube)
     if not reuse.any():
-        return box_jets(geometry, q_tube, v_tube, pose)
-    GP, GF = np.full(motion.HP.shape[:-1], np.inf), np.full(motion.HF.shape[:-1], np.inf)
+        _, HP, _, HF, proven = box_jets(geometry, q_tube, v_tube, pose)
+        return HP, HF, proven
     HP, HF, proven = motion.HP.copy(), motion.HF.copy(), reuse.copy()
     todo = np.flatnonzero(~reuse)
     if todo.size:
-        GP[todo], HP[todo], GF[todo], HF[todo], proven[todo] = box_jets(geometry, q_tube[todo], v_tube[todo],
-                                                                        pose[todo])
-    return GP, HP, GF, HF, proven
+        _, HP[todo], _, HF[todo], proven[todo] = box_jets(geometry, q_tube[todo], v_tube[todo], pose[todo])
+    return HP, HF, proven
 
 
 def _torque_side_bound(spec: ErrorSpec, l1: float):

@@ -236,10 +236,10 @@ def test_identify_h4_certified_table_errors_name_spec_file_and_key(run_and_spec,
 
 def test_identify_h4_with_a_coarse_encoder_says_what_leaves_the_prior(run_and_spec, tmp_path):
     """4 096 counts per turn on a 0.8 s log: the box stays at the prior, and the result says which parameters, which
-    radius term dominates (the second-order terms of the Mnac and Ibc columns: the truncation's over the motion
-    tubes or the encoder's, which the same tubes' bounds serve; radii above 1e2 N m per unit parameter), and what
-    would help; the row radius is labelled by its parts (no bare bound_processed); the statements are in
-    sources."""
+    radius term dominates (a second-order term of the Mnac and Ibc columns: since wide boxes are split, the
+    encoder's over the encoder boxes here, the truncation's over the motion tubes before; radii above 1e2 N m per
+    unit parameter), and what would help; the row radius is labelled by its parts (no bare bound_processed); the
+    statements are in sources."""
     from typer.testing import CliRunner
 
     from h4bench.scenarios.cli import app
