@@ -418,14 +418,15 @@ def _const_ein(spec, const, jet: Jet, left: bool) -> Jet:
                None if jet.h is None else one("YZ", jet.h))
 
 
-def jet_inverse(m: Jet, centre=None, rounds: int = 2) -> Jet:
+def jet_inverse(m: Jet, centre=None, rounds: int = 2, start: MR | None = None) -> Jet:
     """The jet of ``M^-1`` for a jet of square matrices (..., k, k): ``Y = M^-1``, ``Y_a = -Y M_a Y``,
     ``Y_ab = -(T_a Y_b + T_b Y_a) - Y M_ab Y`` with ``T_a = Y M_a``.
 
     centre : None, or (Y0, dz): an enclosure Y0 (..., k, k) of the inverse at the box's centre z0 and dz (..., n)
     an enclosure of ``z - z0`` over the box; then Y is narrowed ``rounds`` times by the centred form
-    ``Y0 + Y_z dz`` (the plain interval inverse over a box is widened by the conditioning of M)."""
-    y = inverse(m.v)
+    ``Y0 + Y_z dz`` (the plain interval inverse over a box is widened by the conditioning of M).
+    start : None, or another enclosure of M^-1 over the box (e.g. the hull over sub-boxes); the narrower is used."""
+    y = inverse(m.v) if start is None else _tighter(inverse(m.v), start)
     if m.g is None:
         return Jet(y)
 

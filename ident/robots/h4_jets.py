@@ -26,9 +26,11 @@ products are enclosed like every other operation.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
-from h4bench.ident.numerics.interval import up
+from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse, narrower
 
 __all__ = ["KrawczykFailure", "box_jets", "nacelle_jets", "point_jets", "pose_box"]
@@ -36,6 +38,8 @@ __all__ = ["KrawczykFailure", "box_jets", "nacelle_jets", "point_jets", "pose_bo
 N_JOINTS = 4
 _KRAWCZYK_TRIES = 6
 CENTRED_ROUNDS = 2  # centred-form rounds for the pose's gradient over a box (_x_jet)
+SPLIT = 2  # sub-boxes per joint of a box whose pose gradient is wide (_x_jet)
+SPLIT_ABOVE = 0.05  # the relative width of the pose gradient above which a box is split (_x_jet)
 
 
 class KrawczykFailure(ArithmeticError):
@@ -137,18 +141,24 @@ def pose_box(geometry, Q: MR, x_hat: np.ndarray) -> MR:
         "singularity")
 
 
-def _x_jet(geometry, Q: MR, X: MR, order: int, x_hat=None, centred: int = 0) -> Jet:
-    """The pose as a jet in q (4 variables): value X, gradient J, Hessian x_qq.
+def _x_jet(geometry, Q: MR, X: MR, order: int, x_hat=None, centred: int = 0, split: int = 0):
+    """The pose as a jet in q (4 variables): value X, gradient J, Hessian x_qq; and the enclosure of Jx^-1 over
+    (X, Q) it used. Returns (jet, jx_inv).
 
     centred : rounds of the centred form ``J(Q) in J(q^) + x_qq(Q) (Q - q^)`` (q^ = Q's centre, x_hat its pose),
     each followed by x_qq from the narrower J: the plain interval J over a box is widened by the conditioning of
-    Jx, the centred one only by x_qq times the box's radius."""
+    Jx, the centred one only by x_qq times the box's radius.
+    split : on the boxes whose plain J is wider than :data:`SPLIT_ABOVE` (relative), J and Jx^-1 are also
+    enclosed as the hull of their enclosures over ``split``^4 sub-boxes of Q's radius (:func:`_split_inverse`):
+    without it a wide box's J makes x_qq wide, and the centred form (J from x_qq) cannot recover."""
     n = N_JOINTS
     _, _, _, jx, jq, _, _ = _loop(geometry, Jet(Q), Jet(X))
     jx_inv = inverse(jx.v)
     g = jx_inv * jq.v[..., None, :]  # J (S, 4, 4): x's gradient in q
     if order < 2:
-        return Jet(X, g)
+        return Jet(X, g), jx_inv
+    if split > 1 and x_hat is not None:
+        jx_inv, g = _narrow_by_split(geometry, Q, x_hat, jx_inv, g, split)
     qj = Jet.variables(Q, n, 0, 2)
 
     def hessian(grad):  # T: the Hessian of G(x(q), q) without x's own; x_qq = (2 Jx)^-1 T = 0.5 Jx^-1 T
@@ -158,12 +168,64 @@ def _x_jet(geometry, Q: MR, X: MR, order: int, x_hat=None, centred: int = 0) -> 
     xqq = hessian(g)
     if centred:
         q_hat = MR(Q.c)
-        J_hat = _x_jet(geometry, q_hat, pose_box(geometry, q_hat, x_hat), 1).g
+        J_hat = _x_jet(geometry, q_hat, pose_box(geometry, q_hat, x_hat), 1)[0].g
         dQ = MR(np.zeros_like(Q.c), Q.r, Q.a)  # Q - q^
         for _ in range(centred):  # mean value: x_qq at a point between q^ and q, over every tau (untied)
             g = narrower(g, J_hat + ein("...ijk,...k->...ij", xqq.untied(), dQ))
             xqq = narrower(xqq, hessian(g))
-    return Jet(X, g, xqq)
+    return Jet(X, g, xqq), jx_inv
+
+
+def _spread_ratio(m: MR) -> np.ndarray:
+    """(S,) the largest distance from the centre over the largest |centre| of each (S, k, k) matrix."""
+    return np.max(m._spread(), axis=(-1, -2)) / np.maximum(np.max(np.abs(m.c), axis=(-1, -2)), 1e-300)
+
+
+def _narrow_by_split(geometry, Q: MR, x_hat, jx_inv: MR, g: MR, split: int):
+    """(jx_inv, g) narrowed on the boxes where g is wide (:func:`_x_jet`); unchanged where a sub-box fails."""
+    wide = np.flatnonzero(_spread_ratio(g) > SPLIT_ABOVE)
+    if wide.size == 0:
+        return jx_inv, g
+    try:
+        inv_s, g_s = _split_inverse(geometry, Q[wide], x_hat[wide], split)
+    except (KrawczykFailure, SingularIntervalMatrix):
+        return jx_inv, g
+    out = []
+    for whole, part in ((jx_inv, inv_s), (g, g_s)):
+        best = narrower(whole[wide], part)
+        a = None if whole.a is None and best.a is None else (
+            np.zeros_like(whole.c) if whole.a is None else whole.a.copy())
+        m = MR(whole.c.copy(), whole.r.copy(), a)
+        m.c[wide], m.r[wide] = best.c, best.r
+        if a is not None:
+            m.a[wide] = 0.0 if best.a is None else best.a
+        out.append(m)
+    return tuple(out)
+
+
+def _split_inverse(geometry, Q: MR, x_hat, split: int):
+    """Enclosures of Jx^-1 and J = Jx^-1 diag(Jq) (S, 4, 4) over the boxes Q (S, 4) (a Taylor model in tau or
+    not) as the hull over ``split``^4 sub-boxes, each ``Q.c + d +- r_k`` (same tau part) with d on a grid of
+    Q's radius and r_k covering its share of the radius and the rounding of ``Q.c + d``: every q of Q lies in a
+    sub-box, where the pose box, Jx^-1 and J are enclosed as in :func:`_x_jet` (a plain interval of the range
+    over every tau). Raises what :func:`pose_box` or :func:`inverse` raise."""
+    c0 = _loop(geometry, Jet(MR(Q.c)), Jet(MR(x_hat)))
+    J0 = np.linalg.solve(c0[3].v.c, np.eye(N_JOINTS)[None] * c0[4].v.c[:, None, :])  # to start each sub-pose
+    grid = (2.0 * np.arange(split) + 1.0) / split - 1.0
+    lo = hi = None
+    for o in itertools.product(grid, repeat=N_JOINTS):
+        d = np.asarray(o) * Q.r
+        ck = Q.c + d
+        rk = (Q.r / split + 2 * U * (np.abs(ck) + np.abs(d) + Q.r)) * (1 + 8 * U) + 1e-300
+        Qk = MR(ck, rk, Q.a)
+        Xk = pose_box(geometry, Qk, x_hat + np.einsum("sij,sj->si", J0, d))
+        _, _, _, jx, jq, _, _ = _loop(geometry, Jet(Qk), Jet(Xk))
+        inv_k = inverse(jx.v)
+        g_k = inv_k * jq.v[..., None, :]
+        parts = [(m.lo, m.hi) for m in (inv_k, g_k)]
+        lo = [p[0] for p in parts] if lo is None else [np.minimum(a, p[0]) for a, p in zip(lo, parts)]
+        hi = [p[1] for p in parts] if hi is None else [np.maximum(a, p[1]) for a, p in zip(hi, parts)]
+    return tuple(MR.from_bounds(a, b) for a, b in zip(lo, hi))
 
 
 def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
@@ -176,7 +238,8 @@ def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
     n = 2 * N_JOINTS
     X = pose_box(geometry, Q, x_hat)
     # everything that depends on q alone in the 4 variables q (a quarter of the Hessian entries), then padded
-    x = _x_jet(geometry, Q, X, order, x_hat=x_hat, centred=CENTRED_ROUNDS if order == 2 else 0)
+    x, jx_inv = _x_jet(geometry, Q, X, order, x_hat=x_hat, centred=CENTRED_ROUNDS if order == 2 else 0,
+                       split=SPLIT if order == 2 else 0)
     q = Jet.variables(Q, N_JOINTS, 0, order)
     ab, pb, dc, jx, jq, ucross, _ = _loop(geometry, q, x)
     centre = None
@@ -184,7 +247,7 @@ def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
         q_hat = MR(Q.c)
         jx_hat = _loop(geometry, Jet(q_hat), Jet(pose_box(geometry, q_hat, x_hat)))[3].v
         centre = (inverse(jx_hat), MR(np.zeros_like(Q.c), Q.r, Q.a))
-    jinv = jet_inverse(jx, centre)
+    jinv = jet_inverse(jx, centre, start=jx_inv)
     J = jinv * jq[..., None, :]
     # d(Jq_i)/dt = u . (B_i' x AB) + u . (PB x AB') with B_i' = (u x PB) qd_i: the first term is qd_i times the
     # function of q alone u . ((u x PB) x AB), computed here in the 4 variables q

@@ -235,9 +235,11 @@ def test_identify_h4_certified_table_errors_name_spec_file_and_key(run_and_spec,
 
 
 def test_identify_h4_with_a_coarse_encoder_says_what_leaves_the_prior(run_and_spec, tmp_path):
-    """4 096 counts per turn: the box stays at the prior, and the result says which parameters, which radius term
-    dominates (the truncation of the Mnac and Ibc columns, radii of 1e6 N m per unit parameter), and what would
-    help; the row radius is labelled by its parts (no bare bound_processed); the statements are in sources."""
+    """4 096 counts per turn on a 0.8 s log: the box stays at the prior, and the result says which parameters, which
+    radius term dominates (a second-order term of the Mnac and Ibc columns: since wide boxes are split, the
+    encoder's over the encoder boxes here, the truncation's over the motion tubes before; radii above 1e2 N m per
+    unit parameter), and what would help; the row radius is labelled by its parts (no bare bound_processed); the
+    statements are in sources."""
     from typer.testing import CliRunner
 
     from h4bench.scenarios.cli import app
@@ -249,14 +251,16 @@ def test_identify_h4_with_a_coarse_encoder_says_what_leaves_the_prior(run_and_sp
     assert res.exit_code == 0, res.output
     r = json.loads((tmp_path / "o" / "result.json").read_text())
     diag = r["certified"]["prior_diagnosis"]
-    assert len(diag["parameters"]) == 14 and diag["dominant"] == "truncation"
+    assert len(diag["parameters"]) == 14 and diag["dominant"] in ("truncation", "second_order")
     assert {c["name"] for c in diag["columns"]} <= {"Mnac", "Ibc"}
-    assert max(c["max_radius_per_unit"] for c in diag["columns"]) > 1e5
+    # about 575 N m per unit since the pose gradient of a wide box is enclosed over sub-boxes (h4_jets._x_jet's
+    # split; about 1e6 before): still far above the torque side's 1.3 N m
+    assert max(c["max_radius_per_unit"] for c in diag["columns"]) > 1e2
     out = " ".join(res.output.split())
     assert "warning: 14 of 14 parameters stay at the prior" in out and "finer encoder" in out
     assert "bound_processed" not in r and "bound_processed" not in res.output
     rr = r["certified"]["row_radius"]
-    assert rr["torque_side_max"] == pytest.approx(run_.noise_bound, rel=1e-9) and rr["total_median"] > 1e3
+    assert rr["torque_side_max"] == pytest.approx(run_.noise_bound, rel=1e-9) and rr["total_median"] > 1e2
     assert "certified row radius: torque side" in out
     src = r["error_model"]["sources"]
     assert src["assembly_mode"].startswith("stated, not proven") and src["sin_cos"].startswith("stated, not proven")

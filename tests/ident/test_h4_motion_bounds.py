@@ -1,0 +1,87 @@
+"""The certificate's reuse of the measured equation's motion-tube bounds (h4_certified.MotionBounds) against
+independent oracles: containment checked by sampling tau, and the reused second-derivative bounds against central
+differences of the enclosed point gradients at random states inside the exact positions' tubes."""
+
+import numpy as np
+import pytest
+
+from h4bench import sim
+from h4bench.ident.numerics.jets import MR
+from h4bench.ident.processing.errorspec import ErrorSpec
+from h4bench.ident.robots.h4_certified import MotionBounds, Processing, certified_steps
+from h4bench.sim.kinematics import inverse_kinematics
+from tests.ident.h4_hessian_oracle import assert_hessians_within
+
+
+@pytest.fixture(scope="module")
+def geometry():
+    return sim.H4Geometry.from_model(sim.load_model())
+
+
+def _log(geometry, n=61, h=1e-3):
+    """A smooth true motion (n, 4) [rad] around the home pose and its quantised measurement (2 pi / 20000)."""
+    t = np.arange(n) * h
+    x = geometry.x_home + np.stack([0.02 * np.sin(9 * t), 0.015 * np.cos(7 * t), 0.01 * np.sin(5 * t + 0.3),
+                                    0.1 * np.sin(6 * t)], axis=1)
+    q_true = inverse_kinematics(geometry, x)
+    res = 2 * np.pi / 20000
+    return q_true, np.round(q_true / res) * res, res
+
+
+def _spec(res, q_true, h=1e-3):
+    qd = np.diff(q_true, axis=0) / h
+    qdd = np.diff(q_true, 2, axis=0) / h**2
+    return ErrorSpec(n_joints=4, sample_period=h, position_resolution=res, torque_error=1.0,
+                     qd_max=2 * np.abs(qd).max(axis=0) + 0.1, qdd_max=2 * np.abs(qdd).max(axis=0) + 1.0)
+
+
+def test_covers_agrees_with_sampled_containment():
+    rng = np.random.default_rng(3)
+    c, a = rng.normal(size=(50, 4)), rng.normal(size=(50, 4)) * 1e-2
+    outer = MotionBounds(q_tube=MR(c, np.full((50, 4), 1e-3), a), v_tube=MR(c, np.full((50, 4), 0.5)),
+                         HP=np.zeros((50, 4, 2, 8, 8)), HF=np.zeros((50, 4, 2, 8, 8)), proven=np.ones(50, bool))
+    # inner tubes: half of them shifted (centre, slope or radius) by up to twice the room
+    dc, da = rng.uniform(-1, 1, (2, 50, 4)) * 4e-4
+    r = np.full((50, 4), 2e-4) * rng.uniform(0.5, 3.0, (50, 1))
+    inner_q, inner_v = MR(c + dc, r, a + da), MR(c, np.full((50, 4), 0.4))
+    got = outer.covers(inner_q, inner_v)
+    taus = np.linspace(-1, 1, 201)[:, None, None]
+    lo_in, hi_in = inner_q.c + inner_q.a * taus - inner_q.r, inner_q.c + inner_q.a * taus + inner_q.r
+    lo_out, hi_out = outer.q_tube.c + outer.q_tube.a * taus - 1e-3, outer.q_tube.c + outer.q_tube.a * taus + 1e-3
+    sampled = np.all((lo_in >= lo_out) & (hi_in <= hi_out), axis=(0, 2))
+    assert np.all(sampled[got])  # every covered tube is inside at every sampled tau
+    # the containment test is exact for these linear tubes (max over tau at the ends): it misses none beyond a hair
+    assert np.array_equal(got, sampled) and 5 < got.sum() < 45
+    wide_v = MR(c, np.full((50, 4), 0.6))
+    assert not outer.covers(inner_q, wide_v).any()
+    unproven = MotionBounds(outer.q_tube, outer.v_tube, outer.HP, outer.HF, np.zeros(50, bool))
+    assert not unproven.covers(inner_q, inner_v).any()
+
+
+def test_exact_equation_reuses_bounds_that_hold_inside_its_own_tubes(geometry):
+    q_true, q_meas, res = _log(geometry)
+    spec = _spec(res, q_true)
+    h = spec.sample_period
+    measured = certified_steps(geometry, q_meas, spec, Processing())
+    exact = certified_steps(geometry, q_true, spec, Processing(), position_error=0.0, motion=measured.motion)
+    own = certified_steps(geometry, q_true, spec, Processing(), position_error=0.0)
+    assert measured.motion.covers(exact.motion.q_tube, exact.motion.v_tube).all()
+    assert exact.proven_motion.all()
+    np.testing.assert_array_equal(exact.motion.HP, measured.motion.HP)
+    # the reused bounds (over the bigger tubes) are at least about the exact tubes' own ones
+    assert np.median(exact.motion.HF.sum(axis=(-1, -2)) / own.motion.HF.sum(axis=(-1, -2))) >= 1.0
+    # oracle: central differences of the enclosed point gradients at random states inside the EXACT tubes
+    rng = np.random.default_rng(7)
+    steps = np.arange(0, q_true.shape[0] - 1, 6)
+    Qt, Vt = exact.motion.q_tube[steps], exact.motion.v_tube[steps]
+    HP, HF = exact.motion.HP[steps], exact.motion.HF[steps]
+    for _ in range(3):
+        tau = rng.uniform(-1, 1, (steps.size, 1))
+        zq = Qt.c + Qt.a * tau + rng.uniform(-1, 1, Qt.shape) * Qt.r
+        zv = Vt.c + rng.uniform(-1, 1, Vt.shape) * Vt.r
+        assert_hessians_within(geometry, zq, zv, HP, HF)
+    # a log that is not the measured one's truth (shifted by 10 counts): nothing is reused, the jets run
+    shifted = certified_steps(geometry, q_true + 10 * res, spec, Processing(), position_error=0.0,
+                              motion=measured.motion)
+    assert not measured.motion.covers(shifted.motion.q_tube, shifted.motion.v_tube).any()
+    assert shifted.proven_motion.all()
