@@ -48,6 +48,7 @@ import numpy as np
 from h4bench.ident.numerics.interval import down, mid_rad, point_matmul, up
 from h4bench.portable import matmul as pmatmul
 from h4bench.ident.numerics.lp import (
+    BASIC,
     LPError,
     LPFallbackWarning,
     LPModel,
@@ -64,6 +65,7 @@ __all__ = [
     "ChebyshevResult",
     "HULL_INFO_KEYS",
     "HullResult",
+    "HullWarm",
     "SafeBound",
     "chebyshev",
     "hull_report",
@@ -78,6 +80,9 @@ __all__ = [
 #: a problem with at most this many rows is solved on all of them from the start (no constraint generation:
 #: on such small problems it saves nothing, and at bounds of 1e-12 relative HiGHS failed some working-set LPs)
 ALL_ROWS_UP_TO = 150
+#: default of interval_hull's ``pool_entries``: problems of at most this many matrix entries (16 MB) keep every row
+#: in the pool of rows checked after each solve (0: the ``pool_rows`` nearest only)
+POOL_ENTRIES = 2_000_000
 _CHUNK = 8192  # rows per block when scanning W: temporaries stay small (no page-fault cost, little memory)
 
 
@@ -118,6 +123,20 @@ class HullResult:
     status: str
     info: dict = field(default_factory=dict)
     points: np.ndarray | None = None  # (p, 2p) the LP solutions (float, unverified), columns min_i then max_i
+    warm: HullWarm | None = None  # the working set and each LP's last optimal basis (a warm start, :func:`interval_hull`)
+
+
+@dataclass
+class HullWarm:
+    """A hull's final working set and its LPs' bases, to warm-start a hull of the same rows over a smaller box.
+
+    rows : (k,) the working set's row indices in the model's order; bases : 2p entries, LP j's
+    ``(col_status, row_status)`` after its last optimal solve (HiGHS basis statuses, for the model's first
+    ``len(row_status)`` rows), or None. They steer the LPs only: any rows and any basis give rigorous endpoints.
+    """
+
+    rows: np.ndarray
+    bases: list
 
 
 def _violated_rows(W, dx_cols, m0, thr, skip):
@@ -245,9 +264,9 @@ class _WorkingSet:
         per-solve budget (:class:`LPError` when HiGHS rejects rows); ``earlier`` the ``(rows, duals)`` of this
         call's last optimal solve before a re-solve (a valid dual guess of fewer rows), or None."""
         sol, rows, earlier = None, self.idx, None
-        for _ in range(max_rounds):
-            try:
-                sol, rows = self.model.solve(cost), self.idx
+        for k in range(max_rounds):
+            try:  # a re-solve after added rows keeps the cost (LPModel's dual_after_rows may then apply)
+                sol, rows = self.model.solve(cost if k == 0 else None), self.idx
             except LPError:
                 return None, rows, earlier
             if sol.status != "optimal":
@@ -311,6 +330,34 @@ def hull_report(info: dict, names) -> tuple[dict, str | None]:
                  "earlier solve) or the prior's")
 
 
+def _usable(warm: HullWarm | None, n_rows: int, n_lp: int) -> bool:
+    """Whether ``warm`` fits a hull of ``n_rows`` rows and ``n_lp`` LPs (distinct rows in range, one basis slot per
+    LP, each basis over at most its rows)."""
+    if warm is None or n_rows <= ALL_ROWS_UP_TO or len(warm.bases) != n_lp:
+        return False
+    rows = np.asarray(warm.rows)
+    if rows.size == 0 or rows.min() < 0 or rows.max() >= n_rows or np.unique(rows).size != rows.size:
+        return False
+    return all(b is None or len(b[1]) <= rows.size for b in warm.bases)
+
+
+def _tight(warm: HullWarm) -> tuple[np.ndarray, list]:
+    """The rows of ``warm`` that are non-basic (tight) in some LP's basis, in their order, and the bases on them.
+
+    A row basic in every basis (its slack basic: it cuts no LP's optimum) is dropped from each basis with its
+    basic slack, so every basis keeps as many basic variables as rows. Without any basis, all rows."""
+    rows = np.asarray(warm.rows, dtype=np.int64)
+    known = [b for b in warm.bases if b is not None]
+    if not known:
+        return rows, list(warm.bases)
+    tight = np.zeros(rows.size, dtype=bool)
+    for _, rs in known:
+        tight[: len(rs)] |= np.fromiter((st != BASIC for st in rs), dtype=bool, count=len(rs))
+    keep = np.flatnonzero(tight)
+    bases = [None if b is None else (b[0], [b[1][k] for k in keep[keep < len(b[1])]]) for b in warm.bases]
+    return rows[keep], bases
+
+
 def _fallback_guesses(j, sol, rows, earlier) -> list:
     """The dual guesses ``(j, rows, y)`` of LP j whose solve did not finish: the duals HiGHS held where it
     stopped (``sol`` of status 'limit', when valid) and those of the last optimal solve before it on fewer rows
@@ -338,11 +385,13 @@ def interval_hull(
     center: np.ndarray | None = None,
     initial_rows: int = 60,
     pool_rows: int = 4000,
+    pool_entries: int | None = None,
     add_rows: int = 20,
     violation_tol: float = 1e-10,
     lp_tol: float = 1e-9,
     max_rounds: int = 100,
     lp_budget: dict | None = None,
+    warm: HullWarm | None = None,
 ) -> HullResult:
     """Rigorous outer enclosure (tight to the LP tolerances) of the hull of ``{x in Q : bl <= W x <= bu}``.
 
@@ -357,7 +406,14 @@ def interval_hull(
     two nearest ``1 / row_scale_k``, then columns to unit root-mean-square, shifted to ``center``.
 
     Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary (in the LP's
-    scaled coordinates); the nearest ``initial_rows`` and ``2p`` spread rows form the first working set.
+    scaled coordinates); the nearest ``initial_rows`` and ``2p`` spread rows form the first working set. With
+    ``warm`` (:attr:`HullResult.warm` of a hull of the same rows over a larger box, e.g. the previous round of a
+    refinement) the first working set is its rows, in its order, and each LP's first solve starts from that
+    LP's basis there (the rows added since basic): the optima move little when the box shrinks, so the simplex
+    takes few steps. Rows and bases steer the LPs only; the endpoints stay safe dual bounds. The pool of rows checked after each solve
+    holds the ``max(pool_rows, pool_entries / p)`` nearest rows (every row of a problem of at most
+    ``pool_entries`` matrix entries: each solve is then checked against all rows, and no LP is re-solved after
+    the final check).
     The 2p LPs are solved one after the other (all minima, then all maxima in reverse order, so that
     consecutive optima are close and warm starts cheap); after each solve the rows it may violate (the
     Cauchy-Schwarz test of the module docstring, exact for the rest) are checked and up to ``add_rows`` most
@@ -380,7 +436,8 @@ def interval_hull(
     that HiGHS cannot solve at all (:class:`LPError`) keeps its endpoint the same way and is listed in
     ``info['lp_failures']`` (a model it rejects also sets ``info['lp_error']``, the message). ``info`` also
     carries the model's counters ``lp_solves``, ``lp_iterations``, ``lp_limit_hits``, ``lp_retries``,
-    ``lp_fallbacks`` (:meth:`~ident.numerics.lp.LPModel.counters`).
+    ``lp_fallbacks`` (:meth:`~ident.numerics.lp.LPModel.counters`). ``warm`` holds the final working set and
+    each LP's last optimal basis (:class:`HullWarm`).
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
@@ -397,10 +454,14 @@ def interval_hull(
     d = column_scale(W, power2_scale(size))
     rho = (half + violation_tol * unit - np.abs(m0)) / (_row_norms(W, d) + 1e-300)  # critical radii
     initial_rows, add_rows = max(initial_rows, 4 * p), max(add_rows, p)  # many parameters: more rows at once
-    near = _near_rows(rho, max(pool_rows, initial_rows))
+    pool_entries = POOL_ENTRIES if pool_entries is None else int(pool_entries)
+    near = _near_rows(rho, max(pool_rows, initial_rows, pool_entries // max(p, 1)))
     first = np.arange(n_rows) if n_rows <= ALL_ROWS_UP_TO else np.union1d(near[:initial_rows],
                                                                          _spread_rows(n_rows, 2 * p))
     n_lp = 2 * p
+    bases: list = [None] * n_lp
+    if _usable(warm, n_rows, n_lp):
+        first, bases = _tight(warm)
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
     costs[p + np.arange(p), np.arange(p)] = -1.0  # LP p + i: min -theta_i = -max theta_i
@@ -410,6 +471,7 @@ def interval_hull(
     extra: list = []  # further dual guesses (j, rows, y) of LPs that fell back
     failures: list[int] = []
     fell_back: list[int] = []
+    final: list = [None] * n_lp  # LP j's basis after its last optimal solve (for a later warm start)
     lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
     todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
@@ -421,6 +483,9 @@ def interval_hull(
             rounds += 1
             solved = []
             for j in todo:
+                if bases[j] is not None:  # this LP's basis of the warm start (used once)
+                    model.set_basis_status(*bases[j])
+                    bases[j] = None
                 sol, rows, earlier = ws.solve(costs[j], max_rounds, violation_tol, add_rows)
                 if sol is None or sol.status == "limit":  # not solved: coarser safe guesses (module docstring)
                     (failures if sol is None else fell_back).append(int(j))
@@ -432,6 +497,7 @@ def interval_hull(
                 dx_sol[:, j], x_sol[:, j] = sol.z, sol.x
                 nz = sol.duals != 0.0  # duals of the original rows for the original cost +-e_i (any y is valid)
                 duals[j] = (rows[nz], sol.duals[nz])
+                final[j] = model.basis_status() if rows.size == ws.idx.size else None
                 solved.append(j)
             todo = []
             if not infeasible and solved:  # full check of the solutions just computed against all N rows
@@ -458,7 +524,9 @@ def interval_hull(
     }
     if lp_error is not None:
         info["lp_error"] = lp_error
-    return HullResult(lower=lower, upper=upper, status="infeasible" if infeasible else "ok", info=info, points=x_sol)
+    warm_out = None if ws is None or infeasible else HullWarm(rows=ws.idx.copy(), bases=final)
+    return HullResult(lower=lower, upper=upper, status="infeasible" if infeasible else "ok", info=info, points=x_sol,
+                      warm=warm_out)
 
 
 @dataclass
