@@ -117,3 +117,49 @@ def test_signed_hull_warm_rounds_give_the_former_box(seed, monkeypatch):
     tol = 1e-7 * np.maximum(old.upper - old.lower, 1e-300)
     assert np.all(np.abs(new.lower - old.lower) <= tol) and np.all(np.abs(new.upper - old.upper) <= tol)
     assert new.contains(theta).all() and new.info["refinements"] == old.info["refinements"]
+
+
+@pytest.mark.slow  # about a minute on a loaded 2-core machine: two identify runs with 3 refinement rounds each
+def test_identify_spec_gives_the_former_box(tmp_path, monkeypatch):
+    """End to end: ``identify --urdf --spec`` on a short synthetic TX40 log (tests/ident/test_serial_certified.py's,
+    with 3 refinement rounds) gives the former path's box within the LP tolerance, and both hold the truth."""
+    from h4bench.ident.robots import tx40
+    from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
+    from tests.ident.test_serial_certified import DT, _log
+
+    robot = tx40.robot()
+    _, theta, q, tau, spec = _log(robot, T=1.2)
+    csv, toml = tmp_path / "log.csv", tmp_path / "spec.toml"
+    head = "t," + ",".join(f"q{i + 1}" for i in range(6)) + "," + ",".join(f"tau{i + 1}" for i in range(6))
+    np.savetxt(csv, np.column_stack([np.arange(q.shape[0]) * DT, q, tau]), delimiter=",", header=head, comments="",
+               fmt="%.17g")
+    toml.write_text(f"""[error_model]
+sample_period = {DT}
+counts_per_turn = {2**17}
+torque_timing = "sample"
+torque_error = 0.5
+torque_rate = {[float(v) for v in spec.torque_rate]}
+qd_max = {[float(v) for v in spec.qd_max]}
+qdd_max = {[float(v) for v in spec.qdd_max]}
+
+[certified]
+kernel_steps = 80
+stride = 40
+refine = 3
+""")
+    truth = robot.base(200, 0).from_standard(theta)
+
+    def run(name):
+        r = identify_urdf_spec(csv, tx40.urdf_path(), toml, coupled_wrist=(4, 5), out=tmp_path / name)
+        m = r["methods"]["certified"]
+        assert m["status"] == "ok" and m["info"]["lp_fallbacks"] == 0
+        return np.asarray(m["lower"]), np.asarray(m["upper"]), m["info"]
+
+    lo, hi, info = run("new")
+    assert info["refinements"] >= 1 and np.all((lo <= truth) & (truth <= hi))
+    monkeypatch.setattr(hull_module, "POOL_ENTRIES", 0)
+    monkeypatch.setattr(uncertain_signed, "WARM_ROWS", False)
+    lo0, hi0, info0 = run("former")
+    tol = 1e-7 * np.maximum(hi0 - lo0, 1e-300)
+    assert info0["refinements"] == info["refinements"]
+    assert np.all(np.abs(lo - lo0) <= tol) and np.all(np.abs(hi - hi0) <= tol)
