@@ -125,7 +125,7 @@ def test_identify_spec_gives_the_former_box(tmp_path, monkeypatch):
     with 3 refinement rounds) gives the former path's box within the LP tolerance, and both hold the truth."""
     from h4bench.ident.robots import tx40
     from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
-    from tests.ident.test_serial_certified import DT, _log
+    from tests.ident.test_serial_certified import DT, _log, spec_toml
 
     robot = tx40.robot()
     _, theta, q, tau, spec = _log(robot, T=1.2)
@@ -133,20 +133,7 @@ def test_identify_spec_gives_the_former_box(tmp_path, monkeypatch):
     head = "t," + ",".join(f"q{i + 1}" for i in range(6)) + "," + ",".join(f"tau{i + 1}" for i in range(6))
     np.savetxt(csv, np.column_stack([np.arange(q.shape[0]) * DT, q, tau]), delimiter=",", header=head, comments="",
                fmt="%.17g")
-    toml.write_text(f"""[error_model]
-sample_period = {DT}
-counts_per_turn = {2**17}
-torque_timing = "sample"
-torque_error = 0.5
-torque_rate = {[float(v) for v in spec.torque_rate]}
-qd_max = {[float(v) for v in spec.qd_max]}
-qdd_max = {[float(v) for v in spec.qdd_max]}
-
-[certified]
-kernel_steps = 80
-stride = 40
-refine = 3
-""")
+    toml.write_text(spec_toml(spec, kernel_steps=80, stride=40, refine=3))
     truth = robot.base(200, 0).from_standard(theta)
 
     def run(name):
