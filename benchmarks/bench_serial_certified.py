@@ -164,8 +164,8 @@ def main() -> None:
             if "compare" in r:
                 c = r["compare"]
                 for v in VARIANTS:
-                    print(f"  {v}: {c[v]['total']:.1f} s (equation {c[v]['equation']:.1f} s, hull {c[v]['hull']:.1f} s), "
-                          f"lp {c[v]['lp']}", flush=True)
+                    print(f"  {v}: {c[v]['total']:.1f} s (equation {c[v]['equation']:.1f} s, "
+                          f"hull {c[v]['hull']:.1f} s), lp {c[v]['lp']}", flush=True)
                 print(f"  new / former: {c['ratio_new_over_former']}; largest endpoint difference "
                       f"{c.get('endpoint_diff_max_rel', float('nan')):.3g} of the former width (new narrower by at "
                       f"most {c.get('new_narrower_by_max_rel', float('nan')):.3g})", flush=True)

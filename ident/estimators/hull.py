@@ -47,8 +47,8 @@ import numpy as np
 
 from h4bench.ident.numerics.interval import down, mid_rad, point_matmul, up
 from h4bench.portable import matmul as pmatmul
+from h4bench.ident.estimators.hull_warm import HullWarm, tight_rows, usable
 from h4bench.ident.numerics.lp import (
-    BASIC,
     LPError,
     LPFallbackWarning,
     LPModel,
@@ -123,20 +123,7 @@ class HullResult:
     status: str
     info: dict = field(default_factory=dict)
     points: np.ndarray | None = None  # (p, 2p) the LP solutions (float, unverified), columns min_i then max_i
-    warm: HullWarm | None = None  # the working set and each LP's last optimal basis (a warm start, :func:`interval_hull`)
-
-
-@dataclass
-class HullWarm:
-    """A hull's final working set and its LPs' bases, to warm-start a hull of the same rows over a smaller box.
-
-    rows : (k,) the working set's row indices in the model's order; bases : 2p entries, LP j's
-    ``(col_status, row_status)`` after its last optimal solve (HiGHS basis statuses, for the model's first
-    ``len(row_status)`` rows), or None. They steer the LPs only: any rows and any basis give rigorous endpoints.
-    """
-
-    rows: np.ndarray
-    bases: list
+    warm: HullWarm | None = None  # the working set and each LP's last optimal basis (interval_hull's warm start)
 
 
 def _violated_rows(W, dx_cols, m0, thr, skip):
@@ -330,34 +317,6 @@ def hull_report(info: dict, names) -> tuple[dict, str | None]:
                  "earlier solve) or the prior's")
 
 
-def _usable(warm: HullWarm | None, n_rows: int, n_lp: int) -> bool:
-    """Whether ``warm`` fits a hull of ``n_rows`` rows and ``n_lp`` LPs (distinct rows in range, one basis slot per
-    LP, each basis over at most its rows)."""
-    if warm is None or n_rows <= ALL_ROWS_UP_TO or len(warm.bases) != n_lp:
-        return False
-    rows = np.asarray(warm.rows)
-    if rows.size == 0 or rows.min() < 0 or rows.max() >= n_rows or np.unique(rows).size != rows.size:
-        return False
-    return all(b is None or len(b[1]) <= rows.size for b in warm.bases)
-
-
-def _tight(warm: HullWarm) -> tuple[np.ndarray, list]:
-    """The rows of ``warm`` that are non-basic (tight) in some LP's basis, in their order, and the bases on them.
-
-    A row basic in every basis (its slack basic: it cuts no LP's optimum) is dropped from each basis with its
-    basic slack, so every basis keeps as many basic variables as rows. Without any basis, all rows."""
-    rows = np.asarray(warm.rows, dtype=np.int64)
-    known = [b for b in warm.bases if b is not None]
-    if not known:
-        return rows, list(warm.bases)
-    tight = np.zeros(rows.size, dtype=bool)
-    for _, rs in known:
-        tight[: len(rs)] |= np.fromiter((st != BASIC for st in rs), dtype=bool, count=len(rs))
-    keep = np.flatnonzero(tight)
-    bases = [None if b is None else (b[0], [b[1][k] for k in keep[keep < len(b[1])]]) for b in warm.bases]
-    return rows[keep], bases
-
-
 def _fallback_guesses(j, sol, rows, earlier) -> list:
     """The dual guesses ``(j, rows, y)`` of LP j whose solve did not finish: the duals HiGHS held where it
     stopped (``sol`` of status 'limit', when valid) and those of the last optimal solve before it on fewer rows
@@ -408,12 +367,13 @@ def interval_hull(
     Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary (in the LP's
     scaled coordinates); the nearest ``initial_rows`` and ``2p`` spread rows form the first working set. With
     ``warm`` (:attr:`HullResult.warm` of a hull of the same rows over a larger box, e.g. the previous round of a
-    refinement) the first working set is its rows, in its order, and each LP's first solve starts from that
-    LP's basis there (the rows added since basic): the optima move little when the box shrinks, so the simplex
-    takes few steps. Rows and bases steer the LPs only; the endpoints stay safe dual bounds. The pool of rows checked after each solve
-    holds the ``max(pool_rows, pool_entries / p)`` nearest rows (every row of a problem of at most
-    ``pool_entries`` matrix entries: each solve is then checked against all rows, and no LP is re-solved after
-    the final check).
+    refinement) the first working set is its rows tight in some LP's basis, in its order
+    (:func:`~ident.estimators.hull_warm.tight_rows`), and each LP's first solve starts from its own basis there
+    (the rows added since basic): the optima move little when the box shrinks. Rows and bases steer the LPs
+    only; the endpoints stay safe dual bounds. The pool of rows checked after each solve holds the
+    ``max(pool_rows, pool_entries / p)`` nearest rows (every row of a problem of at most ``pool_entries``
+    matrix entries, default :data:`POOL_ENTRIES`: each solve is then checked against all rows, and the final
+    check finds nothing to re-solve).
     The 2p LPs are solved one after the other (all minima, then all maxima in reverse order, so that
     consecutive optima are close and warm starts cheap); after each solve the rows it may violate (the
     Cauchy-Schwarz test of the module docstring, exact for the rest) are checked and up to ``add_rows`` most
@@ -460,8 +420,8 @@ def interval_hull(
                                                                          _spread_rows(n_rows, 2 * p))
     n_lp = 2 * p
     bases: list = [None] * n_lp
-    if _usable(warm, n_rows, n_lp):
-        first, bases = _tight(warm)
+    if usable(warm, n_rows, n_lp, ALL_ROWS_UP_TO):
+        first, bases = tight_rows(warm)
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
     costs[p + np.arange(p), np.arange(p)] = -1.0  # LP p + i: min -theta_i = -max theta_i

@@ -13,6 +13,7 @@ import pytest
 
 from h4bench import ident
 from h4bench.ident.estimators import hull as hull_module
+from h4bench.ident.estimators import hull_warm
 from h4bench.ident.estimators import uncertain_signed
 from h4bench.ident.estimators.hull import HullWarm, interval_hull, strip_bounds
 from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
@@ -54,7 +55,7 @@ def test_warm_started_hull_over_a_smaller_box_matches_linprog(seed):
     hi = np.minimum(P["hi"], np.maximum(P["theta"], first.upper - 0.2 * (first.upper - first.lower)))
     warm = _hull(P, lo, hi, warm=first.warm)
     cold = _hull(P, lo, hi)
-    tight, bases = hull_module._tight(first.warm)
+    tight, bases = hull_warm.tight_rows(first.warm)
     assert tight.size and np.all(np.isin(tight, first.warm.rows))
     for b, full in zip(bases, first.warm.bases):  # a dropped row is basic in every basis: the bases stay square
         assert sum(st == lp.BASIC for st in b[1]) + sum(st == lp.BASIC for st in b[0]) == len(b[1])
@@ -72,9 +73,10 @@ def test_unusable_warm_starts_are_ignored():
     first = _hull(P, P["lo"], P["hi"])
     good = first.warm
     bad = [HullWarm(rows=np.array([0, n]), bases=good.bases), HullWarm(rows=np.array([3, 3, 4]), bases=good.bases),
-           HullWarm(rows=good.rows, bases=good.bases[:-1]), HullWarm(rows=np.zeros(0, dtype=np.int64), bases=good.bases)]
-    assert not any(hull_module._usable(w, n, 2 * p) for w in bad)
-    assert hull_module._usable(good, n, 2 * p)
+           HullWarm(rows=good.rows, bases=good.bases[:-1]),
+           HullWarm(rows=np.zeros(0, dtype=np.int64), bases=good.bases)]
+    assert not any(hull_warm.usable(w, n, 2 * p, hull_module.ALL_ROWS_UP_TO) for w in bad)
+    assert hull_warm.usable(good, n, 2 * p, hull_module.ALL_ROWS_UP_TO)
     basic = [(list(c), [type(c[0]).kBasic] * len(r)) for c, r in (b for b in good.bases)]  # n + m basic: invalid
     for warm in bad + [HullWarm(rows=good.rows, bases=basic)]:
         _assert_outer_and_tight(_hull(P, P["lo"], P["hi"], warm=warm), P, P["lo"], P["hi"])
