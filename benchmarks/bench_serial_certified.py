@@ -11,14 +11,14 @@ For each arm (UR5; the Panda with its fingers fixed; public URDFs of the ``examp
 
 Printed per arm: the median over the base parameters of width / prior width for both, the median of the
 per-parameter ratio certified / tuned, the enclosed count of the true base parameters, the seconds of each command
-(the certified one split into its equation and its hull) and the certified hull's LP counters; ``--out FILE``
-writes it all as JSON.
+(the certified one split into its equation and its hull, and its CPU seconds) and the certified hull's LP
+counters; ``--out FILE`` writes it all as JSON.
 
 ``--compare`` runs the certified command ``--repeats`` times in each of two variants, interleaved (the same
 machine load): ``former``, the hull LPs as at 7b00d11 (``ident.estimators.hull.POOL_ENTRIES = 0``: the pool of the
 4000 nearest rows; ``ident.estimators.uncertain_signed.WARM_ROWS = False``: every refinement round from its own
 first rows), and ``new`` (the defaults: every row in the pool of a problem up to 2e6 entries; each round
-warm-started from the previous round's tight rows and bases). Printed: the median seconds (total, equation,
+warm-started from the previous round's tight rows and bases). Printed: the median seconds (total, CPU, equation,
 hull) of each, the ratio new / former, and the largest endpoint difference of the two boxes relative to the
 former's width (signed: > 0 where the new box is narrower). The tuned command runs once.
 
@@ -57,7 +57,8 @@ def urdf_path(arm: str, workdir: Path) -> Path:
 
 
 def certified_run(csv, urdf, spec_toml, out, variant: str) -> tuple[dict, dict]:
-    """``identify --spec`` with the hull switches of ``variant``; returns (result, seconds: total/equation/hull)."""
+    """``identify --spec`` with the hull switches of ``variant``; returns (result, seconds: total/equation/hull and
+    cpu, the process's CPU seconds: less sensitive than wall time to the other processes of a loaded machine)."""
     from h4bench.ident.estimators import hull, uncertain_signed
     from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
 
@@ -65,12 +66,12 @@ def certified_run(csv, urdf, spec_toml, out, variant: str) -> tuple[dict, dict]:
     switch = {**saved, **VARIANTS[variant]}
     hull.POOL_ENTRIES, uncertain_signed.WARM_ROWS = switch["POOL_ENTRIES"], switch["WARM_ROWS"]
     try:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         res = identify_urdf_spec(csv, urdf, spec_toml, out=out)
-        total = time.perf_counter() - t0
+        total, cpu = time.perf_counter() - t0, time.process_time() - c0
     finally:
         hull.POOL_ENTRIES, uncertain_signed.WARM_ROWS = saved["POOL_ENTRIES"], saved["WARM_ROWS"]
-    return res, {"total": total, "equation": res["certified"]["seconds"]["equation"],
+    return res, {"total": total, "cpu": cpu, "equation": res["certified"]["seconds"]["equation"],
                  "hull": res["methods"]["certified"].get("seconds")}
 
 
@@ -78,10 +79,10 @@ def compare(runs: dict) -> dict:
     """Medians per variant, ratios new / former, the largest endpoint difference relative to the former width."""
     out = {}
     for v, rs in runs.items():
-        out[v] = {k: float(np.median([s[k] for _, s in rs])) for k in ("total", "equation", "hull")}
+        out[v] = {k: float(np.median([s[k] for _, s in rs])) for k in ("total", "cpu", "equation", "hull")}
         out[v]["lp"] = {k: x for k, x in (rs[0][0]["methods"]["certified"].get("info") or {}).items()
                         if k.startswith("lp")}
-    out["ratio_new_over_former"] = {k: out["new"][k] / out["former"][k] for k in ("total", "equation", "hull")}
+    out["ratio_new_over_former"] = {k: out["new"][k] / out["former"][k] for k in ("total", "cpu", "equation", "hull")}
     a, b = runs["former"][0][0]["methods"]["certified"], runs["new"][0][0]["methods"]["certified"]
     if "lower" in a and "lower" in b:
         w = np.maximum(np.asarray(a["upper"]) - np.asarray(a["lower"]), 1e-300)
@@ -164,7 +165,7 @@ def main() -> None:
             if "compare" in r:
                 c = r["compare"]
                 for v in VARIANTS:
-                    print(f"  {v}: {c[v]['total']:.1f} s (equation {c[v]['equation']:.1f} s, "
+                    print(f"  {v}: {c[v]['total']:.1f} s, cpu {c[v]['cpu']:.1f} s (equation {c[v]['equation']:.1f} s, "
                           f"hull {c[v]['hull']:.1f} s), lp {c[v]['lp']}", flush=True)
                 print(f"  new / former: {c['ratio_new_over_former']}; largest endpoint difference "
                       f"{c.get('endpoint_diff_max_rel', float('nan')):.3g} of the former width (new narrower by at "
