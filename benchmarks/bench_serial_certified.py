@@ -26,7 +26,7 @@ former's width (signed: > 0 where the new box is narrower). The tuned command ru
     python benchmarks/bench_serial_certified.py [--arms ur5,panda] [--seconds 12] [--kernel-steps N] [--out F]
                                                 [--compare] [--repeats 1]
 
-Measured at caa284a with ``--compare --repeats 1 --threads 1`` (2 cores shared with other jobs, load 2-4, so
+Measured at 3217b55 with ``--compare --repeats 1 --threads 1`` (2 cores shared with other jobs, load 2-4, so
 the wall times are inflated and noisy: the same equation took 74 s and 46 s in the UR5's two runs), 12 s logs,
 the kernel family (6324 rows for the UR5, 58 base parameters; the Panda 69):
 
