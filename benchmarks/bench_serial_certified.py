@@ -11,10 +11,39 @@ For each arm (UR5; the Panda with its fingers fixed; public URDFs of the ``examp
 
 Printed per arm: the median over the base parameters of width / prior width for both, the median of the
 per-parameter ratio certified / tuned, the enclosed count of the true base parameters, the seconds of each command
-and the certified hull's LP fallbacks; ``--out FILE`` writes it all as JSON.
+(the certified one split into its equation and its hull, and its CPU seconds) and the certified hull's LP
+counters; ``--out FILE`` writes it all as JSON.
+
+``--compare`` runs the certified command ``--repeats`` times in each of two variants, interleaved (the same
+machine load): ``former``, the hull LPs as at 7b00d11 (``ident.estimators.hull.POOL_ENTRIES = 0``: the pool of the
+4000 nearest rows; ``ident.estimators.uncertain_signed.WARM_ROWS = False``: every refinement round from its own
+first rows), and ``new`` (the defaults: every row in the pool of a problem up to 2e6 entries; each round
+warm-started from the previous round's tight rows and bases). Printed: the median seconds (total, CPU, equation,
+hull) of each, the ratio new / former, and the largest endpoint difference of the two boxes relative to the
+former's width (signed: > 0 where the new box is narrower). The tuned command runs once.
 
     pip install example-robot-data
     python benchmarks/bench_serial_certified.py [--arms ur5,panda] [--seconds 12] [--kernel-steps N] [--out F]
+                                                [--compare] [--repeats 1]
+
+Measured at 3217b55 with ``--compare --repeats 1 --threads 1`` (2 cores shared with other jobs, load 2-4, so
+the wall times are inflated and noisy: the same equation took 74 s and 46 s in the UR5's two runs), 12 s logs,
+the kernel family (6324 rows for the UR5, 58 base parameters; the Panda 69):
+
+======  ==========  ===================  ==============  ==============  =====  ========================
+arm     variant     identify --spec [s]  equation [s]    hull [s]        LP     box
+======  ==========  ===================  ==============  ==============  =====  ========================
+UR5     former      649                  74              573             2364   width/prior 0.0737
+UR5     new         218 (0.34)           46              171 (0.30)      1251   endpoints within 1.6e-8
+Panda   former      592                  53              539             3106   width/prior 0.196
+Panda   new         285 (0.48)           50              234 (0.43)      1476   endpoints within 9.7e-8
+======  ==========  ===================  ==============  ==============  =====  ========================
+
+(LP: HiGHS runs; 0 fallbacks in all four; the Panda's new run had 2 runs stopped at their budget, both solved
+by the cold retry; box: the largest endpoint difference relative to the former width, the new box narrower by at
+most 1.6e-8 (UR5) and 4.3e-8 (Panda) of it: both are safe dual bounds, the new LPs end closer to the optima).
+The UR5's hull alone on the same equation, in one process, by CPU time: former 260 s (893 327 simplex
+iterations, final working set 6618 rows), new 110 s (299 585 iterations, 4420 rows).
 """
 
 import _setup  # noqa: F401  (repository root on sys.path, --threads)
@@ -28,6 +57,8 @@ from pathlib import Path
 
 import numpy as np
 
+#: the hull's switches of the ``--compare`` variants (module docstring)
+VARIANTS = {"former": {"POOL_ENTRIES": 0, "WARM_ROWS": False}, "new": {}}
 ARMS = {"ur5": "ur_description/urdf/ur5_robot.urdf", "panda": "panda_description/urdf/panda.urdf"}
 
 
@@ -44,11 +75,48 @@ def urdf_path(arm: str, workdir: Path) -> Path:
     sys.exit(f"the URDF of {arm} was not found: pip install example-robot-data")
 
 
-def one_arm(arm: str, seconds: float, kernel_steps, workdir: Path, seed: int) -> dict:
+def certified_run(csv, urdf, spec_toml, out, variant: str) -> tuple[dict, dict]:
+    """``identify --spec`` with the hull switches of ``variant``; returns (result, seconds: total/equation/hull and
+    cpu, the process's CPU seconds: less sensitive than wall time to the other processes of a loaded machine)."""
+    from h4bench.ident.estimators import hull, uncertain_signed
+    from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
+
+    saved = {"POOL_ENTRIES": hull.POOL_ENTRIES, "WARM_ROWS": uncertain_signed.WARM_ROWS}
+    switch = {**saved, **VARIANTS[variant]}
+    hull.POOL_ENTRIES, uncertain_signed.WARM_ROWS = switch["POOL_ENTRIES"], switch["WARM_ROWS"]
+    try:
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = identify_urdf_spec(csv, urdf, spec_toml, out=out)
+        total, cpu = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        hull.POOL_ENTRIES, uncertain_signed.WARM_ROWS = saved["POOL_ENTRIES"], saved["WARM_ROWS"]
+    return res, {"total": total, "cpu": cpu, "equation": res["certified"]["seconds"]["equation"],
+                 "hull": res["methods"]["certified"].get("seconds")}
+
+
+def compare(runs: dict) -> dict:
+    """Medians per variant, ratios new / former, the largest endpoint difference relative to the former width."""
+    out = {}
+    for v, rs in runs.items():
+        out[v] = {k: float(np.median([s[k] for _, s in rs])) for k in ("total", "cpu", "equation", "hull")}
+        out[v]["lp"] = {k: x for k, x in (rs[0][0]["methods"]["certified"].get("info") or {}).items()
+                        if k.startswith("lp")}
+    out["ratio_new_over_former"] = {k: out["new"][k] / out["former"][k] for k in ("total", "cpu", "equation", "hull")}
+    a, b = runs["former"][0][0]["methods"]["certified"], runs["new"][0][0]["methods"]["certified"]
+    if "lower" in a and "lower" in b:
+        w = np.maximum(np.asarray(a["upper"]) - np.asarray(a["lower"]), 1e-300)
+        narrower = np.maximum(np.asarray(b["lower"]) - np.asarray(a["lower"]),
+                              np.asarray(a["upper"]) - np.asarray(b["upper"])) / w
+        out["new_narrower_by_max_rel"] = float(np.max(narrower))  # < 0: the new box is wider everywhere
+        out["endpoint_diff_max_rel"] = float(max(np.max(np.abs(np.asarray(b["lower"]) - np.asarray(a["lower"])) / w),
+                                                 np.max(np.abs(np.asarray(b["upper"]) - np.asarray(a["upper"])) / w)))
+    return out
+
+
+def one_arm(arm: str, seconds: float, kernel_steps, workdir: Path, seed: int, repeats: int = 0) -> dict:
     from h4bench.ident.robots.serial import SerialRobot
     from h4bench.scenarios.arm_log import arm_log, arm_spec, write_arm_csv
     from h4bench.scenarios.identify import identify_urdf_csv, urdf_robot_and_prior
-    from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
 
     urdf = urdf_path(arm, workdir)
     robot = SerialRobot(urdf)
@@ -61,14 +129,18 @@ def one_arm(arm: str, seconds: float, kernel_steps, workdir: Path, seed: int) ->
     _, base, prior = urdf_robot_and_prior(urdf)
     truth = base.from_standard(log.theta)
     width0 = np.asarray(prior["upper"]) - np.asarray(prior["lower"])
-    t0 = time.perf_counter()
-    cert = identify_urdf_spec(csv, urdf, spec_toml, out=workdir / f"{arm}-certified")
-    t_cert = time.perf_counter() - t0
+    runs: dict = {v: [] for v in VARIANTS}
+    for k in range(max(repeats, 1)):
+        for v in (VARIANTS if repeats else ["new"]):
+            runs[v].append(certified_run(csv, urdf, spec_toml, workdir / f"{arm}-certified-{v}-{k}", v))
+    cert, secs = runs["new"][0]
+    t_cert = float(np.median([s["total"] for _, s in runs["new"]]))
     t0 = time.perf_counter()
     tuned = identify_urdf_csv(csv, urdf, str(log.torque_error), out=workdir / f"{arm}-tuned")
     t_tuned = time.perf_counter() - t0
     out = {"arm": arm, "joints": robot.n_joints, "base_parameters": len(base), "seconds_log": seconds,
-           "seconds_certified": t_cert, "seconds_tuned": t_tuned, "kernel": cert["certified"].get("kernel"),
+           "seconds_certified": t_cert, "seconds_certified_parts": secs, "seconds_tuned": t_tuned,
+           "kernel": cert["certified"].get("kernel"),
            "dominant": cert["certified"].get("dominant")}
     for name, res in (("certified", cert["methods"]["certified"]), ("tuned", tuned["methods"].get("hull", {}))):
         if "lower" not in res:
@@ -81,6 +153,8 @@ def one_arm(arm: str, seconds: float, kernel_steps, workdir: Path, seed: int) ->
     if "width" in out["certified"] and "width" in out["tuned"]:
         ratio = np.asarray(out["certified"]["width"]) / np.maximum(np.asarray(out["tuned"]["width"]), 1e-300)
         out["certified_over_tuned_median"] = float(np.median(ratio))
+    if repeats:
+        out["compare"] = compare(runs)
     return out
 
 
@@ -92,11 +166,13 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None)
     ap.add_argument("--threads", default=None)
+    ap.add_argument("--compare", action="store_true", help="the former hull against the new one (docstring)")
+    ap.add_argument("--repeats", type=int, default=1, help="runs of each variant with --compare (medians)")
     a = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for arm in a.arms.split(","):
-            r = one_arm(arm, a.seconds, a.kernel_steps, Path(tmp), a.seed)
+            r = one_arm(arm, a.seconds, a.kernel_steps, Path(tmp), a.seed, a.repeats if a.compare else 0)
             rows.append(r)
             c, t = r["certified"], r["tuned"]
             print(f"{arm}: {r['base_parameters']} base parameters; certified width/prior "
@@ -105,6 +181,14 @@ def main() -> None:
                   f"tuned {t.get('width_over_prior_median', float('nan')):.4g} (enclosed {t.get('enclosed')}, "
                   f"{r['seconds_tuned']:.1f} s); certified/tuned median {r.get('certified_over_tuned_median', float('nan')):.3g}",
                   flush=True)
+            if "compare" in r:
+                c = r["compare"]
+                for v in VARIANTS:
+                    print(f"  {v}: {c[v]['total']:.1f} s, cpu {c[v]['cpu']:.1f} s (equation {c[v]['equation']:.1f} s, "
+                          f"hull {c[v]['hull']:.1f} s), lp {c[v]['lp']}", flush=True)
+                print(f"  new / former: {c['ratio_new_over_former']}; largest endpoint difference "
+                      f"{c.get('endpoint_diff_max_rel', float('nan')):.3g} of the former width (new narrower by at "
+                      f"most {c.get('new_narrower_by_max_rel', float('nan')):.3g})", flush=True)
     if a.out:
         Path(a.out).write_text(json.dumps(rows, indent=1))
 

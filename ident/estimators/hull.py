@@ -47,6 +47,7 @@ import numpy as np
 
 from h4bench.ident.numerics.interval import down, mid_rad, point_matmul, up
 from h4bench.portable import matmul as pmatmul
+from h4bench.ident.estimators.hull_warm import HullWarm, tight_rows, usable
 from h4bench.ident.numerics.lp import (
     LPError,
     LPFallbackWarning,
@@ -64,6 +65,7 @@ __all__ = [
     "ChebyshevResult",
     "HULL_INFO_KEYS",
     "HullResult",
+    "HullWarm",
     "SafeBound",
     "chebyshev",
     "hull_report",
@@ -78,6 +80,9 @@ __all__ = [
 #: a problem with at most this many rows is solved on all of them from the start (no constraint generation:
 #: on such small problems it saves nothing, and at bounds of 1e-12 relative HiGHS failed some working-set LPs)
 ALL_ROWS_UP_TO = 150
+#: default of interval_hull's ``pool_entries``: problems of at most this many matrix entries (16 MB) keep every row
+#: in the pool of rows checked after each solve (0: the ``pool_rows`` nearest only)
+POOL_ENTRIES = 2_000_000
 _CHUNK = 8192  # rows per block when scanning W: temporaries stay small (no page-fault cost, little memory)
 
 
@@ -118,6 +123,7 @@ class HullResult:
     status: str
     info: dict = field(default_factory=dict)
     points: np.ndarray | None = None  # (p, 2p) the LP solutions (float, unverified), columns min_i then max_i
+    warm: HullWarm | None = None  # the working set and each LP's last optimal basis (interval_hull's warm start)
 
 
 def _violated_rows(W, dx_cols, m0, thr, skip):
@@ -245,9 +251,9 @@ class _WorkingSet:
         per-solve budget (:class:`LPError` when HiGHS rejects rows); ``earlier`` the ``(rows, duals)`` of this
         call's last optimal solve before a re-solve (a valid dual guess of fewer rows), or None."""
         sol, rows, earlier = None, self.idx, None
-        for _ in range(max_rounds):
-            try:
-                sol, rows = self.model.solve(cost), self.idx
+        for k in range(max_rounds):
+            try:  # a re-solve after added rows keeps the cost (LPModel's dual_after_rows may then apply)
+                sol, rows = self.model.solve(cost if k == 0 else None), self.idx
             except LPError:
                 return None, rows, earlier
             if sol.status != "optimal":
@@ -338,11 +344,13 @@ def interval_hull(
     center: np.ndarray | None = None,
     initial_rows: int = 60,
     pool_rows: int = 4000,
+    pool_entries: int | None = None,
     add_rows: int = 20,
     violation_tol: float = 1e-10,
     lp_tol: float = 1e-9,
     max_rounds: int = 100,
     lp_budget: dict | None = None,
+    warm: HullWarm | None = None,
 ) -> HullResult:
     """Rigorous outer enclosure (tight to the LP tolerances) of the hull of ``{x in Q : bl <= W x <= bu}``.
 
@@ -357,7 +365,15 @@ def interval_hull(
     two nearest ``1 / row_scale_k``, then columns to unit root-mean-square, shifted to ``center``.
 
     Constraint generation: rows are ranked by the distance of ``center`` to their strip boundary (in the LP's
-    scaled coordinates); the nearest ``initial_rows`` and ``2p`` spread rows form the first working set.
+    scaled coordinates); the nearest ``initial_rows`` and ``2p`` spread rows form the first working set. With
+    ``warm`` (:attr:`HullResult.warm` of a hull of the same rows over a larger box, e.g. the previous round of a
+    refinement) the first working set is its rows tight in some LP's basis, in its order
+    (:func:`~ident.estimators.hull_warm.tight_rows`), and each LP's first solve starts from its own basis there
+    (the rows added since basic): the optima move little when the box shrinks. Rows and bases steer the LPs
+    only; the endpoints stay safe dual bounds. The pool of rows checked after each solve holds the
+    ``max(pool_rows, pool_entries / p)`` nearest rows (every row of a problem of at most ``pool_entries``
+    matrix entries, default :data:`POOL_ENTRIES`: each solve is then checked against all rows, and the final
+    check finds nothing to re-solve).
     The 2p LPs are solved one after the other (all minima, then all maxima in reverse order, so that
     consecutive optima are close and warm starts cheap); after each solve the rows it may violate (the
     Cauchy-Schwarz test of the module docstring, exact for the rest) are checked and up to ``add_rows`` most
@@ -380,7 +396,8 @@ def interval_hull(
     that HiGHS cannot solve at all (:class:`LPError`) keeps its endpoint the same way and is listed in
     ``info['lp_failures']`` (a model it rejects also sets ``info['lp_error']``, the message). ``info`` also
     carries the model's counters ``lp_solves``, ``lp_iterations``, ``lp_limit_hits``, ``lp_retries``,
-    ``lp_fallbacks`` (:meth:`~ident.numerics.lp.LPModel.counters`).
+    ``lp_fallbacks`` (:meth:`~ident.numerics.lp.LPModel.counters`). ``warm`` holds the final working set and
+    each LP's last optimal basis (:class:`HullWarm`).
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
@@ -397,10 +414,14 @@ def interval_hull(
     d = column_scale(W, power2_scale(size))
     rho = (half + violation_tol * unit - np.abs(m0)) / (_row_norms(W, d) + 1e-300)  # critical radii
     initial_rows, add_rows = max(initial_rows, 4 * p), max(add_rows, p)  # many parameters: more rows at once
-    near = _near_rows(rho, max(pool_rows, initial_rows))
+    pool_entries = POOL_ENTRIES if pool_entries is None else int(pool_entries)
+    near = _near_rows(rho, max(pool_rows, initial_rows, pool_entries // max(p, 1)))
     first = np.arange(n_rows) if n_rows <= ALL_ROWS_UP_TO else np.union1d(near[:initial_rows],
                                                                          _spread_rows(n_rows, 2 * p))
     n_lp = 2 * p
+    bases: list = [None] * n_lp
+    if usable(warm, n_rows, n_lp, ALL_ROWS_UP_TO):
+        first, bases = tight_rows(warm)
     costs = np.zeros((n_lp, p))
     costs[np.arange(p), np.arange(p)] = 1.0  # LP i: min theta_i
     costs[p + np.arange(p), np.arange(p)] = -1.0  # LP p + i: min -theta_i = -max theta_i
@@ -410,6 +431,7 @@ def interval_hull(
     extra: list = []  # further dual guesses (j, rows, y) of LPs that fell back
     failures: list[int] = []
     fell_back: list[int] = []
+    final: list = [None] * n_lp  # LP j's basis after its last optimal solve (for a later warm start)
     lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
     todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
     try:
@@ -421,6 +443,9 @@ def interval_hull(
             rounds += 1
             solved = []
             for j in todo:
+                if bases[j] is not None:  # this LP's basis of the warm start (used once)
+                    model.set_basis_status(*bases[j])
+                    bases[j] = None
                 sol, rows, earlier = ws.solve(costs[j], max_rounds, violation_tol, add_rows)
                 if sol is None or sol.status == "limit":  # not solved: coarser safe guesses (module docstring)
                     (failures if sol is None else fell_back).append(int(j))
@@ -432,6 +457,7 @@ def interval_hull(
                 dx_sol[:, j], x_sol[:, j] = sol.z, sol.x
                 nz = sol.duals != 0.0  # duals of the original rows for the original cost +-e_i (any y is valid)
                 duals[j] = (rows[nz], sol.duals[nz])
+                final[j] = model.basis_status() if rows.size == ws.idx.size else None
                 solved.append(j)
             todo = []
             if not infeasible and solved:  # full check of the solutions just computed against all N rows
@@ -458,7 +484,9 @@ def interval_hull(
     }
     if lp_error is not None:
         info["lp_error"] = lp_error
-    return HullResult(lower=lower, upper=upper, status="infeasible" if infeasible else "ok", info=info, points=x_sol)
+    warm_out = None if ws is None or infeasible else HullWarm(rows=ws.idx.copy(), bases=final)
+    return HullResult(lower=lower, upper=upper, status="infeasible" if infeasible else "ok", info=info, points=x_sol,
+                      warm=warm_out)
 
 
 @dataclass

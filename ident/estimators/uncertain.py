@@ -38,11 +38,11 @@ from h4bench.ident.errors import InconsistentDataError
 from h4bench.ident.estimators.enclosure import Verdict, decide_and_enclose
 from h4bench.ident.estimators.checks import check_bound, check_finite, check_prior, real_array
 from h4bench.ident.estimators.estimate import least_squares_center
-from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, hull_report, interval_hull, strip_bounds
+from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, HullWarm, hull_report, interval_hull, strip_bounds
 from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
 from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
 
-__all__ = ["uncertain_hull"]
+__all__ = ["uncertain_hull", "uncertain_hull_rows"]
 
 
 # ----------------------------------------------------------------------------------------------- checks
@@ -119,6 +119,12 @@ def _op_upper(W_lo, W_hi, y, b, theta) -> float:
 
 
 def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
+    """Guaranteed box enclosing the Oettli-Prager set (:func:`uncertain_hull_rows` without its warm start)."""
+    return uncertain_hull_rows(Wc, D, y, bound, prior, lp_tol=lp_tol)[0]
+
+
+def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: HullWarm | None = None
+                        ) -> tuple[Box, HullWarm | None]:
     """Guaranteed box enclosing ``S = {theta in Q : exists W in [Wc - D, Wc + D], |y - W theta| <= bound}``.
 
     Wc : (m, p) centre regressor; D : (m, p) or scalar radius >= 0 (units of W); y : (m,); bound : scalar or
@@ -131,6 +137,10 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     within its tolerance without a proof (then the box encloses a slightly larger set). Raises :class:`~ident.InconsistentDataError`
     when S is proven empty (``min_bound`` the smallest consistent scalar bound, rounded up; ``scale_lower``
     a proven lower bound of the factor the given bounds need); ``ValueError``/``TypeError`` on bad input.
+
+    warm : the warm start of the hull LPs (:class:`~ident.estimators.hull.HullWarm`, rows of the 2m stacked rows
+    ``[W_lo; W_hi]``), e.g. of the same system over a larger prior; it steers the LPs only, the box is rigorous
+    whatever it is. Returns ``(box, warm)``: the hull's own warm start (None when its LPs did not run through).
     """
     t0 = time.perf_counter()
     Wc, D, y = _check_interval_matrix(Wc, D, y)
@@ -177,7 +187,7 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
 
     def hull(factor, start):
         rows = (A, BL, BU) if factor == 1.0 else stacked(b * factor)
-        return interval_hull(*rows, lo, hi, scale=rows_b * factor, center=start, lp_tol=lp_tol)
+        return interval_hull(*rows, lo, hi, scale=rows_b * factor, center=start, lp_tol=lp_tol, warm=warm)
 
     def fallback(what):
         warnings.warn(f"uncertain_hull: {what}", LPFallbackWarning, stacklevel=4)
@@ -197,4 +207,4 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     info.update(report)
     lower, upper = np.clip(res.lower, lo, hi), np.clip(res.upper, lo, hi)
     info["seconds"] = time.perf_counter() - t0
-    return Box(lower=lower, upper=upper, names=names, info=info)
+    return Box(lower=lower, upper=upper, names=names, info=info), res.warm

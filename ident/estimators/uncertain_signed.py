@@ -12,10 +12,13 @@ import numpy as np
 
 from h4bench.ident.box import Box
 from h4bench.ident.estimators.hull import COUNTERS
-from h4bench.ident.estimators.uncertain import uncertain_hull
+from h4bench.ident.estimators.uncertain import uncertain_hull_rows
 from h4bench.ident.numerics.interval import down, point_matvec, up
 
 __all__ = ["signed_uncertain_hull"]
+
+#: each round's hull LPs start from the previous round's working set and bases (False: from their own first rows)
+WARM_ROWS = True
 
 
 def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: float = 0.0):
@@ -33,12 +36,14 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
     ``info['refinements']`` (the rounds done), the last round's hull statistics, and the LP counters
     (``lp_solves``, ``lp_iterations``, ``lp_limit_hits``, ``lp_retries``, ``lp_fallbacks``) summed and
     ``lp_fallback_parameters`` gathered over all rounds (an endpoint that fell back in an earlier round is still
-    a valid bound: each round's box encloses the set, and the next round's prior is that box).
+    a valid bound: each round's box encloses the set, and the next round's prior is that box). Each round's hull
+    LPs start from the previous round's working set and each LP's basis there (the same stacked rows over a
+    smaller box: the optima move little; a start that steers the LPs only).
     """
     Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
     lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
     names = prior.names
-    box = None
+    box, warm = None, None
     for it in range(int(refine) + 1):
         flip = np.abs(hi) < np.abs(lo)
         sg = np.where(flip, -1.0, 1.0)
@@ -53,7 +58,8 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
         y2 = 0.5 * y2lo + 0.5 * y2hi
         extra = up(up(y2hi - y2lo) + up(D @ np.abs(lo1)) * (1 + 4 * Wc.shape[1] * 2.0**-53))
         b2 = up(np.asarray(bound, dtype=float) + extra)
-        sub = uncertain_hull(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names))
+        sub, warm = uncertain_hull_rows(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names),
+                                        warm=warm if WARM_ROWS else None)
         lo_f = np.nextafter(lo1 + sub.lower, -np.inf)
         hi_f = np.nextafter(lo1 + sub.upper, np.inf)
         new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))

@@ -49,6 +49,7 @@ from h4bench.portable import matmul as pmatmul
 from h4bench.ident.numerics.interval import TINY, U, down, mul, point_matmul, sub, sum_down, up
 
 __all__ = [
+    "BASIC",
     "LARGE_ENTRY",
     "LPError",
     "LPFallbackWarning",
@@ -67,6 +68,7 @@ __all__ = [
     "shifted_safe_bound",
 ]
 
+BASIC = highspy.HighsBasisStatus.kBasic  #: the basis status of a basic variable (a row's: its slack is basic)
 LARGE_ENTRY = 1e15  # HiGHS's default large_matrix_value: addRows rejects a block holding an entry this large
 _ERROR = highspy.HighsStatus.kError
 _lock = threading.Lock()
@@ -370,6 +372,27 @@ class LPModel:
     def set_basis(self, basis) -> None:
         """Start the next solve from ``basis`` (a :meth:`basis` of a model of the same shape)."""
         check(self.highs.setBasis(basis), "setBasis")
+
+    def basis_status(self) -> tuple[list, list]:
+        """HiGHS's current basis as ``(col_status, row_status)`` lists (for :meth:`set_basis_status`)."""
+        b = self.highs.getBasis()
+        return list(b.col_status), list(b.row_status)
+
+    def set_basis_status(self, col_status, row_status) -> bool:
+        """Start the next solve from the basis ``(col_status, row_status)`` of :meth:`basis_status`, taken from a
+        model with the same columns and the same first ``len(row_status)`` rows (e.g. the same rows over another
+        box): the rows after those are made basic (their slacks), so the basis stays square and non-singular
+        if it was. Returns whether HiGHS accepted it (if not, the next solve starts from the current basis: a
+        start only, the solution does not depend on it beyond the LP tolerances)."""
+        if len(col_status) != self.n or len(row_status) > self.m:
+            return False
+        b = highspy.HighsBasis()
+        b.col_status = list(col_status)
+        b.row_status = list(row_status) + [highspy.HighsBasisStatus.kBasic] * (self.m - len(row_status))
+        b.valid = True
+        ok = self.highs.setBasis(b) != _ERROR
+        self._cost_changed = True  # not a rows-only change
+        return ok
 
     def set_cost(self, cost, *, normalize: bool = True) -> None:
         """Set the objective ``min cost^T x`` (cost (n,) finite, not zero) without solving; HiGHS sees

@@ -77,6 +77,28 @@ def _log(robot, seed=0, T=1.2, qdd_scale=1.0, torque_scale=1.0):
     return traj, theta, q_meas, tau_meas, spec
 
 
+def spec_toml(spec, *, kernel_steps: int, stride: int, refine: int) -> str:
+    """The ``--spec`` TOML of a synthetic log of :func:`_log` (its ErrorSpec ``spec``, the square wave's amplitude
+    as the torque error) with a ``[certified]`` table."""
+    return f"""[error_model]
+sample_period = {DT}
+counts_per_turn = {COUNTS}
+torque_timing = "sample"
+torque_error = {TORQUE_ERROR}
+torque_rate = {[float(v) for v in spec.torque_rate]}
+qd_max = {[float(v) for v in spec.qd_max]}
+qdd_max = {[float(v) for v in spec.qdd_max]}
+
+[error_model.sources]
+torque_error = "the synthetic log's square-wave amplitude"
+
+[certified]
+kernel_steps = {kernel_steps}
+stride = {stride}
+refine = {refine}
+"""
+
+
 def _true_rows(robot, theta, traj, eq):
     """int k Y(q, qd, qdd) dt and int k tau dt of the true motion, Gauss-Legendre on every sample step."""
     k = make_kernel(2 * H, DT, "triangle").knots

@@ -318,14 +318,14 @@ def test_signed_hull_sums_the_budget_counters_over_its_rounds(monkeypatch):
     prior = ident.Box(-3 * np.ones(4), 3 * np.ones(4), names=("a", "b", "c", "d"))
     full = signed_uncertain_hull(Wc, D, y, 0.5, prior, refine=2)
     calls = []
-    real = uncertain_hull
+    real = uncertain_signed.uncertain_hull_rows
 
     def spy(*args, **kwargs):
-        box = real(*args, **kwargs)
+        box, warm = real(*args, **kwargs)
         calls.append(box.info)
-        return box
+        return box, warm
 
-    monkeypatch.setattr(uncertain_signed, "uncertain_hull", spy)
+    monkeypatch.setattr(uncertain_signed, "uncertain_hull_rows", spy)
     monkeypatch.setattr(lp, "ITERATIONS_FLOOR", 4)
     monkeypatch.setattr(lp, "ITERATIONS_PER_LINE", 0)
     with pytest.warns(ident.LPFallbackWarning, match="per-solve budget"):

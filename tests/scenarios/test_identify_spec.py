@@ -21,7 +21,7 @@ from h4bench.ident.robots import tx40
 from h4bench.scenarios.cli import app
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "ident"))
-from test_serial_certified import DT, _log  # noqa: E402
+from test_serial_certified import DT, _log, spec_toml  # noqa: E402
 
 URDF = str(tx40.urdf_path())
 
@@ -37,23 +37,7 @@ def synthetic_csv(tmp_path_factory):
         for k in range(q.shape[0]):
             f.write(",".join(repr(float(x)) for x in [k * DT, *q[k], *tau[k]]) + "\n")
     toml = d / "spec.toml"
-    toml.write_text(f"""[error_model]
-sample_period = {DT}
-counts_per_turn = {2**17}
-torque_timing = "sample"
-torque_error = 0.5
-torque_rate = {[float(v) for v in spec.torque_rate]}
-qd_max = {[float(v) for v in spec.qd_max]}
-qdd_max = {[float(v) for v in spec.qdd_max]}
-
-[error_model.sources]
-torque_error = "the synthetic log's square-wave amplitude"
-
-[certified]
-kernel_steps = 80
-stride = 40
-refine = 1
-""")
+    toml.write_text(spec_toml(spec, kernel_steps=80, stride=40, refine=1))
     return csv, toml, robot.base(200, 0).from_standard(theta), d
 
 
