@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
-import mujoco
-import numpy as np
-import pytest
+import os
 
-from h4bench import sim
+# The default run has 2 worker processes (pyproject.toml: -n 2) on a 2-core machine: one BLAS thread each, unless
+# the caller says otherwise (the workers and every child process a test starts inherit it; the results are the same
+# at any thread count, tests/test_blas_independence.py)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from h4bench import sim  # noqa: E402
 
 
 @pytest.fixture(scope="session")
