@@ -116,6 +116,7 @@ def test_enclosure_quick_and_resume(tmp_path):
     assert again["campaign"]["timings"]["runs_computed"] == 1  # the reused runs' times are not counted again
 
 
+@pytest.mark.slow  # in the default run: test_trust's `run paper --quick --json` in a real process, test_paper_quick
 def test_cli_run_json_and_table(tmp_path, paper_run):
     runner = CliRunner()
     res = runner.invoke(app, ["run", "paper", "--quick", "--json", "--out", str(tmp_path / "p")])
