@@ -6,8 +6,8 @@ OpenBLAS is built with DYNAMIC_ARCH in numpy's and scipy's wheels: the kernel it
 ``OPENBLAS_CORETYPE`` forces the one another CPU would pick (SandyBridge: AVX without FMA; Haswell: AVX2 with
 FMA). The variables are set explicitly in each child's environment (an environment may set them already, e.g.
 ``OPENBLAS_L2_SIZE`` for an older OpenBLAS on some CPUs; it is removed). The experiment is the quick paper
-scenario made shorter (a 3 s design, the hull alone) so that the four processes take seconds; the full-size
-figures are produced by ``benchmarks/blas_matrix.py``.
+scenario made shorter (a 3 s design, the hull alone) so that the four processes take seconds, and the signed
+Oettli-Prager hull of a small interval system; the full-size figures are produced by ``benchmarks/blas_matrix.py``.
 """
 
 from __future__ import annotations
@@ -38,7 +38,16 @@ spec["estimators"]["wls"] = False
 spec["estimators"]["explain"] = False
 run = run_experiment(spec, 0)
 hull = run.boxes["hull"]
+# the certified path's hull (an interval regressor, a prior of both signs), data made without BLAS
+from h4bench.ident.box import Box
+from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
+rng = np.random.default_rng(3)
+W = rng.standard_normal((400, 8))
+D = 0.01 * np.abs(rng.standard_normal((400, 8)))
+y = np.einsum("ij,j->i", W, rng.uniform(-1, 1, 8)) + rng.uniform(-0.5, 0.5, 400)
+ubox = signed_uncertain_hull(W, D, y, np.full(400, 0.5), Box(-2 * np.ones(8), 2 * np.ones(8)), refine=2)
 print(json.dumps({"hashes": run.content_hashes, "lower": [float(v).hex() for v in hull.lower],
+                  "uncertain": [float(v).hex() for v in np.concatenate([ubox.lower, ubox.upper])],
                   "upper": [float(v).hex() for v in hull.upper],
                   "enclosed": bool(np.all((hull.lower <= run.theta_true) & (run.theta_true <= hull.upper))),
                   "kernels": sorted({b["kernel"] for b in platform()["blas"]}),
@@ -79,3 +88,12 @@ def test_design_controller_dataset_and_hull_box_are_the_same_bits_everywhere(run
         assert r["hashes"] == first["hashes"], (setting, r["hashes"], first["hashes"])
         assert (r["lower"], r["upper"]) == (first["lower"], first["upper"]), setting
         assert r["enclosed"] is True, setting
+
+
+def test_the_signed_uncertain_hull_is_the_same_bits_everywhere(runs):
+    """The certified path's hull (:func:`ident.estimators.uncertain_signed.signed_uncertain_hull`): its LP shift,
+    least-squares centre and chord radii are computed without BLAS (at 7b00d11 this small problem gave different
+    bits under Haswell and SandyBridge)."""
+    first = next(iter(runs.values()))["uncertain"]
+    for setting, r in runs.items():
+        assert r["uncertain"] == first, setting

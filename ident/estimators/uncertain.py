@@ -40,6 +40,7 @@ from h4bench.ident.estimators.checks import check_bound, check_finite, check_pri
 from h4bench.ident.estimators.estimate import least_squares_center
 from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, HullWarm, hull_report, interval_hull, strip_bounds
 from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
+from h4bench.portable import matmul as pmatmul
 from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
 
 __all__ = ["uncertain_hull", "uncertain_hull_rows"]
@@ -85,7 +86,7 @@ def _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol=1e-9, center=None):
     bl = np.concatenate([np.full(m, -np.inf), y])
     bu = np.concatenate([y, np.full(m, np.inf)])
     x0 = np.append(theta0, 0.0)
-    a0 = A[:, :p] @ theta0
+    a0 = pmatmul(A[:, :p], theta0)
     d = np.append(column_scale(A[:, :p], np.tile(power2_scale(b), 2)), 1.0)
     xl, xu = np.append(lo, 0.0), np.append(hi, s_max)
     cost = np.zeros(p + 1)
@@ -171,7 +172,7 @@ def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: H
         return A, BL, BU
 
     info: dict = {"method": "interval", "rows": m}
-    center = least_squares_center(Wc.T @ Wc, Wc, y, lo, hi, None if scalar else b)
+    center = least_squares_center(pmatmul(Wc.T, Wc), Wc, y, lo, hi, None if scalar else b)
 
     def decide() -> Verdict:
         s_lo, s_up, theta, solved = _op_scale(W_lo, W_hi, y, b, lo, hi, lp_tol, center)

@@ -14,6 +14,7 @@ from h4bench.ident.box import Box
 from h4bench.ident.estimators.hull import COUNTERS
 from h4bench.ident.estimators.uncertain import uncertain_hull_rows
 from h4bench.ident.numerics.interval import down, point_matvec, up
+from h4bench.portable import matmul as pmatmul
 
 __all__ = ["signed_uncertain_hull"]
 
@@ -56,7 +57,7 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
         plo, phi_ = point_matvec(W1, lo1, lo1)  # enclosure of Wc lo
         y2lo, y2hi = np.nextafter(y - phi_, -np.inf), np.nextafter(y - plo, np.inf)
         y2 = 0.5 * y2lo + 0.5 * y2hi
-        extra = up(up(y2hi - y2lo) + up(D @ np.abs(lo1)) * (1 + 4 * Wc.shape[1] * 2.0**-53))
+        extra = up(up(y2hi - y2lo) + up(pmatmul(D, np.abs(lo1))) * (1 + 4 * Wc.shape[1] * 2.0**-53))
         b2 = up(np.asarray(bound, dtype=float) + extra)
         sub, warm = uncertain_hull_rows(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names),
                                         warm=warm if WARM_ROWS else None)
