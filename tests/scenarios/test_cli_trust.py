@@ -68,9 +68,11 @@ def _scenario_of(kind: str) -> str:
 
 # ------------------------------------------------------------------- every kind through the real entry point
 # Kinds whose quick run the default suite already makes in-process (test_scenarios: prior_bound, structure,
-# enclosure; test_beyond: outliers, uncertain_regressor; test_judging: enclosure_critical): their pass through the
-# command line is a slow test; paper, certified and tx40 (run nowhere else by default) stay in the default run.
-RUN_ELSEWHERE = {"enclosure", "enclosure_critical", "outliers", "prior_bound", "structure", "uncertain_regressor"}
+# enclosure; test_beyond: outliers, uncertain_regressor; test_judging: enclosure_critical) or through the command
+# line (paper: conftest's paper_quick_cli, checked below by test_the_paper_run_writes_strict_json): their pass here
+# is a slow test; certified and tx40 (run nowhere else by default) stay in the default run.
+RUN_ELSEWHERE = {"enclosure", "enclosure_critical", "outliers", "paper", "prior_bound", "structure",
+                 "uncertain_regressor"}
 
 
 @pytest.fixture(scope="module", params=[pytest.param(k, marks=pytest.mark.slow) if k in RUN_ELSEWHERE else k
@@ -89,6 +91,14 @@ def test_every_kind_prints_its_summary_and_writes_strict_json(table_run):
     assert f"written: {out}/" in res.output and name in res.output
     result = strict_json((out / "result.json").read_text())
     assert result["scenario"] == name
+
+
+def test_the_paper_run_writes_strict_json(paper_quick_cli):
+    """The session's ``run paper --quick`` through the command line (conftest): the same checks as above."""
+    out, output = paper_quick_cli
+    assert f"written: {out}/" in output and "paper" in output
+    assert "Traceback" not in output
+    assert strict_json((out / "result.json").read_text())["scenario"] == "paper"
 
 
 @pytest.mark.slow
