@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident.robots.serial_steps import PARTS, StepGrid
+from h4bench.ident.robots.serial_steps import PARTS, StepGrid, q_remainder
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
 __all__ = ["inertial_rows_reference"]
@@ -59,6 +59,11 @@ class _Steps(StepGrid):
                 gam[a, b] = gam[b, a] = 0.5 * (Y(qh, I[a] + I[b], Z) - g0 - ha[a] - ha[b])
         Mc = np.stack([Y(qh, Z, I[b]) - g0 for b in range(n)])  # (b, i, c): column b of M per unit parameter
         Jq = np.empty((n,) + g0.shape)
+        fk = np.empty((n,) + g0.shape)
+        fab = np.empty((n, n) + g0.shape)  # corners of the q-Hessian's forward differences (q_remainder)
+        for a in range(n):
+            for b in range(a, n):
+                fab[a, b] = fab[b, a] = Y(qh + (eta * I[a] + eta * I[b]), vh, Z)
         dM = np.empty((n, n) + g0.shape)
         dJv = np.empty((n, n) + g0.shape)  # (k, a, i, c): d/dq_k of dh/dv_a at (qh, vh)
         Jv = 2 * np.einsum("abic,b->aic", gam, vh)  # exact: h is quadratic in v
@@ -66,7 +71,8 @@ class _Steps(StepGrid):
         for k in range(n):
             qk = qh + eta * I[k]
             gk = Y(qk, Z, Z)
-            Jq[k] = (Y(qk, vh, Z) - f0) / eta
+            fk[k] = Y(qk, vh, Z)
+            Jq[k] = (fk[k] - f0) / eta
             for b in range(n):
                 dM[k, b] = (Y(qk, Z, I[b]) - gk - Mc[b]) / eta
                 dJv[k, b] = (0.5 * (Y(qk, vh + I[b], Z) - Y(qk, vh - I[b], Z)) - Jv[b]) / eta
@@ -83,18 +89,19 @@ class _Steps(StepGrid):
         dq_mean = sp * dt / 4 + self.qddm * dt**2 / 8
         dq_max = sp * dt / 2 + self.qddm * dt**2 / 8 + ebar
         qddm = self.qddm
-        # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order
+        # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order (Taylor: 1/2 of 4 M)
         dMq = np.einsum("kbic,b->kic", dMB, qddm)
-        A_mot = np.einsum("kic,k->ic", dMq, dq_mean) + 4 * geo["M"] * qddm.sum() * dq_max.sum() ** 2
+        A_mot = np.einsum("kic,k->ic", dMq, dq_mean) + 2 * geo["M"] * qddm.sum() * dq_max.sum() ** 2
         A_pos = np.einsum("kic,k->ic", dMq, ebar)
         # (h + g)(q(t), qd(t)) against (h + g)(qh, vh): first order in q and v (local), the v-quadratic part
-        # exactly (local Christoffel symbols), the q-q and q-v second order with local d/dq of dh/dv and Bernstein
+        # exactly (local Christoffel symbols), the q-q second order with the local q-Hessian (q_remainder), the
+        # q-v one with local d/dq of dh/dv and Bernstein
         absJv = np.abs(Jv)
         absG = np.abs(gam)
         mot = self.ev_mot_max
         Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
         dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
-        rem = (4 * (geo["gamma"] * float(sp.sum()) ** 2 + geo["g"]) * dqs * dqs
+        rem = (q_remainder(fab[None], fk[None], f0[None], qh[None], vh[None], ev_max[None], dq_max[None], geo)[0]
                + np.einsum("kaic,k,a->ic", dJvB, dq_max, ev_max) + 2 * geo["gamma"] * dvs * dvs * dqs)
         H_mot = (np.einsum("kic,k->ic", JqB, dq_mean) + np.einsum("aic,a->ic", absJv, self.ev_mot_mean) + Q_mm + rem)
         # the speed estimate's measurement error enters through the row's exact gradient (window loop, "Jv")

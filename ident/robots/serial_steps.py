@@ -3,10 +3,10 @@ steps, window sums for all windows at once (:mod:`ident.robots.serial_certified`
 evaluates them).
 
 **Per step** j (``[t_j, t_j+1]``, mid-step position ``qh``, speed estimate ``vh``) pinocchio's regressor is called
-at ``qh`` and at ``qh + ETA e_k`` with the arguments of the module docstring of :mod:`ident.robots.serial_certified`
-(gravity, the speed estimate, unit speeds and accelerations: ``2 + 2 n + n (n - 1) / 2 + n (3 n + 2)`` calls,
-each step once); every other operation runs on arrays of many steps at once, in the same arithmetic as the
-per-step reference (:mod:`ident.robots.serial_reference`).
+at ``qh``, at ``qh + ETA e_k`` and at ``qh + ETA (e_a + e_b)`` with the arguments of the module docstring of
+:mod:`ident.robots.serial_certified` (gravity, the speed estimate, unit speeds and accelerations: ``2 + 2 n + n (n -
+1) / 2 + n (3 n + 2) + n (n + 1) / 2`` calls, each step once); every other operation runs on arrays of many steps
+at once, in the same arithmetic as the per-step reference (:mod:`ident.robots.serial_reference`).
 
 **Per window** the regressor at the window's scaled speed and acceleration is not called again: ``Y(q, v, a) =
 g(q) + h(q, v) + M(q) a`` with ``h`` quadratic in v, so the reference's call ``Y(qh_j, sqrt(K_w) vh_j, u_w)`` is
@@ -32,7 +32,7 @@ from numpy.lib.stride_tricks import as_strided
 from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.processing.weakform import Kernel
 
-__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_rows", "local_bounds"]
+__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_rows", "local_bounds", "q_remainder"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
@@ -91,8 +91,8 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
     out = {"g0": np.empty((C,) + sh), "f0": np.empty((C,) + sh), "ha": np.empty((C, n) + sh),
            "pair": np.zeros((C, n, n) + sh), "Mc": np.empty((C, n) + sh), "gk": np.empty((C, n) + sh),
            "fk": np.empty((C, n) + sh), "Mk": np.empty((C, n, n) + sh), "Vp": np.empty((C, n, n) + sh),
-           "Vm": np.empty((C, n, n) + sh)}
-    g0, f0, ha, pair, Mc, gk, fk, Mk, Vp, Vm = out.values()
+           "Vm": np.empty((C, n, n) + sh), "fab": np.empty((C, n, n) + sh)}
+    g0, f0, ha, pair, Mc, gk, fk, Mk, Vp, Vm, fab = out.values()
     for c in range(C):
         qq, v = qh[c], vh[c]
         vp, vm = v + I, v - I  # rows b: v + e_b, v - e_b
@@ -112,7 +112,60 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
                 Mk[c, k, b] = Y(model, data, qk, Z, I[b])
                 Vp[c, k, b] = Y(model, data, qk, vp[b], Z)
                 Vm[c, k, b] = Y(model, data, qk, vm[b], Z)
+        for a in range(n):  # the corners of the q-Hessian's forward differences (a == b: qq + 2 ETA e_a)
+            for b in range(a, n):
+                fab[c, a, b] = Y(model, data, qq + (shifts[a] + shifts[b]), v, Z)
+                fab[c, b, a] = fab[c, a, b]
     return out
+
+
+def q_remainder(fab, fk, f0, qh, vh, ev_max, dq_max, geo):
+    """Bound of the q-q second-order remainder of ``f = h + g`` over a step, per row entry: ``|f(q, v) - f(qh, v)
+    - df/dq(qh, v) (q - qh)|`` for every ``|q - qh| <= dq_max`` and ``|v - vh| <= ev_max`` (per joint).
+
+    fab (C, n, n, ...), fk (C, n, ...), f0 (C, ...): pinocchio's ``Y(qh + ETA (e_a + e_b), vh, 0)``,
+    ``Y(qh + ETA e_a, vh, 0)``, ``Y(qh, vh, 0)``; qh, vh, ev_max, dq_max (C, n). Returns (C, ...).
+
+    Taylor with Lagrange's remainder: ``1/2 sum_ab |d2f/dq_a dq_b (zeta, v)| dq_a dq_b``, zeta in the step's box.
+    The second derivative there is bounded LOCALLY, per entry:
+
+    * the forward difference ``H_ab = (f_ab - f_a - f_b + f_0) / ETA^2`` equals ``d2f/dq_a dq_b (xi, vh)`` at
+      some xi of the rectangle ``[qh, qh + ETA (e_a + e_b)]`` (the mean-value theorem twice; a == b: the second
+      difference over ``qh, qh + ETA e_a, qh + 2 ETA e_a``), up to: pinocchio's stated error ``PIN_REL`` of the
+      four magnitudes and the float operations (``2 PIN_REL sum |f| / ETA^2``), the spacings' rounding (the
+      corners' coordinates are rounded sums ``qh + ETA``: a relative ``1e-9`` of ``|H|`` for the mixed ones, whose
+      rectangle stays exact, and ``3 sup|df/dq| ulp / ETA^2`` for the unequally spaced diagonal ones, ``ulp`` the
+      spacing of the floats at ``|qh| + 4 ETA``);
+    * from xi to zeta (``|zeta - xi| <= dq_max + 2 ETA`` per coordinate, two of them shifted): the third
+      derivatives, ``<= 8 sup|f(., vh)| <= 8 (gamma (sum|vh|)^2 + g)`` (Bernstein, degree 2 in each angle: the
+      module docstring of :mod:`ident.robots.serial_certified`), times ``sum dq_max + 4 ETA``;
+    * from vh to v: ``h(q, v) - h(q, vh) = sum_ab Gamma_ab (v_a v_b - vh_a vh_b)`` and ``|d2 Gamma / dq2| <= 4
+      gamma``: ``4 gamma (2 sum|vh| sum ev_max + (sum ev_max)^2)``.
+
+    The global bound it replaces, ``4 (gamma (sum|v|)^2 + g)`` for every entry, is about 1e4x the local
+    second derivatives on the arms measured (a 7-joint arm, 1 kHz): the terms left global here multiply one
+    more small factor (a step's displacement, or the speed estimate's error).
+    """
+    eta = ETA
+    C, n = qh.shape
+    ex = (slice(None),) + (None,) * (f0.ndim - 1)
+    H = fab - fk[:, :, None] - fk[:, None, :]
+    H += f0[:, None, None]
+    mag = np.abs(fab) + np.abs(fk[:, :, None]) + np.abs(fk[:, None, :])
+    mag += np.abs(f0)[:, None, None]
+    np.abs(H, out=H)
+    H *= (1.0 + 1e-9) / eta**2
+    H += mag * (2.0 * PIN_REL / eta**2)
+    del mag
+    vs = np.sum(np.abs(vh), axis=1)
+    dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
+    sup = geo["gamma"] * vs**2 + geo["g"]  # sup over q of |f(., vh)| per unit parameter
+    ulp = np.spacing(np.max(np.abs(qh), axis=1) + 4 * eta)
+    glob = (8 * sup * (dqs + 4 * eta) + 3 * 2 * sup * ulp / eta**2
+            + 4 * geo["gamma"] * (2 * vs * dvs + dvs * dvs))  # added to every |H_ab|
+    rem = 0.5 * np.einsum("sab...,sa,sb->s...", H, dq_max, dq_max)
+    rem += (0.5 * glob * dqs * dqs)[ex]
+    return rem
 
 
 def _bound(d, c, mag, flt):
@@ -165,7 +218,6 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     JqB = np.abs(Jq) + (eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]))[c4] + flt * (mag[:, None] + np.abs(Jq) * eta)
     dMB = _bound(dM, 2 * eta * geo["M"], 2.0, flt)  # |dM| + 2 eta M + flt (2 + |dM| eta)
     dJvB = _bound(dJv, (4 * eta * geo["gamma"] * (vs + 1))[c4 + (None,)], 2 * mag[:, None, None], flt)
-    del p, Jq, dM, dJv
     # speeds and position boxes of the step (true motion)
     ebar = grid.ebar[J]
     ev_max = grid.ev_mot_max + grid.ev_pos[J]
@@ -173,19 +225,20 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     qddm = grid.qddm
     dq_mean = sp * dt / 4 + qddm * dt**2 / 8
     dq_max = sp * dt / 2 + qddm * dt**2 / 8 + ebar
+    rem_qq = q_remainder(p["fab"], p["fk"], f0, grid.qbar[J], vh, ev_max, dq_max, geo)
+    del p, Jq, dM, dJv
     c3 = (slice(None), None, None)
-    # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order
+    # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order (Taylor: 1/2 of 4 M)
     dMq = np.einsum("skbic,b->skic", dMB, qddm)
     A_mot = (np.einsum("skic,sk->sic", dMq, dq_mean)
-             + (4 * geo["M"] * qddm.sum() * np.sum(dq_max, axis=1) ** 2)[c3])
+             + (2 * geo["M"] * qddm.sum() * np.sum(dq_max, axis=1) ** 2)[c3])
     A_pos = np.einsum("skic,sk->sic", dMq, ebar)
     # (h + g)(q(t), qd(t)) against (h + g)(qh, vh) (the reference's comments)
     absG = np.abs(gam)
     mot = grid.ev_mot_max
     Q_mm = np.einsum("sabic,a,b->sic", absG, mot, mot)
     dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
-    rem = ((4 * (geo["gamma"] * np.sum(sp, axis=1) ** 2 + geo["g"]) * dqs * dqs)[c3]
-           + np.einsum("skaic,sk,sa->sic", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
+    rem = (rem_qq + np.einsum("skaic,sk,sa->sic", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
     H_mot = (np.einsum("skic,sk->sic", JqB, dq_mean) + np.einsum("saic,a->sic", np.abs(Jv), grid.ev_mot_mean)
              + Q_mm + rem)
     # Q_all - Q_mm without the cancellation: ev_max = mot + ev_pos, so the difference is a sum of non-negative
