@@ -14,7 +14,10 @@ matrix, ``h(q, v)`` the Coriolis/centrifugal and ``g(q)`` the gravity torques, a
   ``int_step k qdd`` is integrated by parts; summed over the window (``k = 0`` at both ends) this is exactly
   ``sum_j M_j (k_{j+1} qd_{j+1} - k_j qd_j - k'_j dq_j)``: the true positions' steps ``dq_j`` enter exactly,
   the speeds only through the DIFFERENCES of M between neighbouring steps (a Coriolis-like term);
-* ``int k (h + g)``: ``int_step |k|`` times the integrand at the mid-step position and a speed estimate;
+* ``int k (h + g)``: ``int_step |k|`` times the integrand at the mid-step position and a speed estimate; the
+  speed's first-order term is integrated exactly against the kernel (linear on the step): the step's measured mean
+  speed enters the centre, its position error the exact gradient, and only ``qdd_max dt^3 / 12`` times ``|k'|``
+  the radius (:func:`ident.robots.serial_steps.speed_linear`), not the speed estimate's truncation;
 * friction, rotor inertia, offsets: ``int k qdd = -sum k'_j dq_j`` (exact), ``int k qd = -int k' q``
   (trapezoid, error ``qdd_max dt^3 / 12`` per step), ``int k = 1``; Coulomb ``sign(qd)`` per step: certain when
   the step's speed bound excludes 0, else ``[-1, 1] int_step |k|``.

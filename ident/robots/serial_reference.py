@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident.robots.serial_steps import PARTS, StepGrid, q_remainder
+from h4bench.ident.robots.serial_steps import PARTS, StepGrid, q_remainder, speed_linear
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
 __all__ = ["inertial_rows_reference"]
@@ -96,15 +96,21 @@ class _Steps(StepGrid):
         # (h + g)(q(t), qd(t)) against (h + g)(qh, vh): first order in q and v (local), the v-quadratic part
         # exactly (local Christoffel symbols), the q-q second order with the local q-Hessian (q_remainder), the
         # q-v one with local d/dq of dh/dv and Bernstein
-        absJv = np.abs(Jv)
         absG = np.abs(gam)
         mot = self.ev_mot_max
         Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
         dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
         rem = (q_remainder(fab[None], fk[None], f0[None], qh[None], vh[None], ev_max[None], dq_max[None], geo)[0]
                + np.einsum("kaic,k,a->ic", dJvB, dq_max, ev_max) + 2 * geo["gamma"] * dvs * dvs * dqs)
-        H_mot = (np.einsum("kic,k->ic", JqB, dq_mean) + np.einsum("aic,a->ic", absJv, self.ev_mot_mean) + Q_mm + rem)
-        # the speed estimate's measurement error enters through the row's exact gradient (window loop, "Jv")
+        H_mot = np.einsum("kic,k->ic", JqB, dq_mean) + Q_mm + rem
+        # the speed's linear term Jv (v - vh) integrated at the true step speeds (speed_linear): the centre term "Jc",
+        # "Jk" times |k'|, the measurement error through the row's exact gradient (window loop, "Jv")
+        Ya = np.stack([Y(qh, I[a], Z) for a in range(n)])
+        gmag = np.abs(np.stack([[Y(qh, I[a] + I[b], Z) if a < b else (Y(qh, I[b] + I[a], Z) if b < a else 0 * g0)
+                                 for b in range(n)] for a in range(n)]))
+        gmag = gmag + np.abs(Ya)[:, None] + np.abs(Ya)[None, :] + 3 * np.abs(g0)
+        lin = {k_: v_[0] for k_, v_ in speed_linear(Jv[None], gam[None], gmag[None], vh[None], self.dq[j][None],
+                                                      self.e[j][None], self.e[j + 1][None], qddm, dt).items()}
         pos = self.ev_pos[j]  # Q_all - Q_mm as a sum of non-negative products (no cancellation)
         Q_pos = (np.einsum("abic,a,b->ic", absG, mot, pos) + np.einsum("abic,a,b->ic", absG, pos, mot)
                  + np.einsum("abic,a,b->ic", absG, pos, pos))
@@ -115,7 +121,7 @@ class _Steps(StepGrid):
                "Cmax": dlt.max(axis=0),
                "Dloc": np.einsum("bic,b->ic", dlt, np.abs(self.dq[j]) + self.e[j] + self.e[j + 1]),
                "Ecur": np.einsum("bic,b->ic", np.abs(Mc), self.e[j]),
-               "mag": np.abs(g0), "Jv": Jv}
+               "mag": np.abs(g0), "Jv": Jv, **lin}
         # sample j (between steps j-1 and j)
         prev = self.cache.get(j - 1)
         if prev is None and with_prev and j - 1 >= self.m - 1:
@@ -151,6 +157,7 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
     ni = 10 * nj
     Wi = np.zeros((R_, nj, ni))
     mag = np.zeros((R_, nj, ni))
+    recon = np.zeros((R_, nj, ni))  # the speed_linear centre term's own error bound (the regressor is pinocchio's)
     parts_i = {name: np.zeros((R_, nj, ni)) for name in PARTS}
     model, data = robot.model, robot.data
     vh, dq = st_.vh, st_.dq
@@ -164,16 +171,18 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
         vs = np.sqrt(K1)[:, None] * vh[st]
         acc = np.zeros((nj, ni))
         ab = np.zeros((nj, ni))
+        jf = np.zeros((nj, ni))
         part = {name: np.zeros((nj, ni)) for name in PARTS}
         xs = np.abs(x).sum(axis=1)
         for jj in range(L):
             j = s + jj
             d = st_.get(j)
             Yj = pin.computeJointTorqueRegressor(model, data, st_.qbar[j], vs[jj], u[jj])
-            acc += Yj + (K1[jj] - 1.0) * d["g0"]
-            ab += np.abs(Yj) + abs(K1[jj] - 1.0) * d["mag"]
+            acc += Yj + (K1[jj] - 1.0) * d["g0"] + K1[jj] * d["Jc"]
+            ab += np.abs(Yj) + abs(K1[jj] - 1.0) * d["mag"] + K1[jj] * d["aJc"]
+            jf += K1[jj] * d["Jf"]
             part["mass_motion"] += K1[jj] * d["A_mot"]
-            part["coriolis_motion"] += K1[jj] * d["H_mot"]
+            part["coriolis_motion"] += K1[jj] * d["H_mot"] + abs(kp[jj]) * d["Jk"]
             part["speed_motion"] += k[jj] * d["B_mot"]
             part["mass_position"] += K1[jj] * d["A_pos"] + d["Cmax"] * xs[jj] + abs(kp[jj]) * d["Dloc"]
             part["coriolis_position"] += K1[jj] * d["H_pos"]
@@ -181,13 +190,12 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
             # measurement through the exact gradient of sum_j k'_j M_j dq_j (sample jj of the window)
             part["gradient_position"] += (dkp[jj] * (d["Ecur"] if jj == 0 else d["Eknot"])
                                           + (abs(kp[jj]) * d["Ediff"] if jj else 0.0))
-        # h at the measured speed estimate: sum_j K1_j Jv_j (delta_{j+m} - delta_{j+1-m}) / S, summed by parts
+        # the speed's linear term at the true step speeds: sum_j K1_j Jv_j (delta_{j+1} - delta_j) / dt, by parts
         Wt = K1[:, None, None, None] * np.stack([st_.get(s + jj)["Jv"] for jj in range(L)])  # (L, a, i, c)
-        G = np.zeros((L + 2 * m - 1,) + Wt.shape[1:])
-        G[2 * m - 1: 2 * m - 1 + L] += Wt  # sample offset jj + m, stored from offset 1 - m
-        G[:L] -= Wt  # sample offset jj + 1 - m
-        eo = e[s + 1 - m: s + L + m]  # (L + 2m - 1, a)
-        part["coriolis_position"] += np.einsum("oaic,oa->ic", np.abs(G), eo) / st_.S
+        G = np.zeros((L + 1,) + Wt.shape[1:])
+        G[1:] += Wt  # sample offset jj + 1
+        G[:L] -= Wt  # sample offset jj
+        part["coriolis_position"] += np.einsum("oaic,oa->ic", np.abs(G), e[s: s + L + 1]) / dt
         # the sample-instant secants w_j in sum_j k_j w_j (M_{j-1} - M_j): (delta_{j+m} - delta_{j-m}) / (2 m dt)
         Wk = k[:, None, None, None] * np.stack([st_.get(s + jj)["dMhat"] for jj in range(L + 1)])  # (L+1, b, i, c)
         G2 = np.zeros((L + 1 + 2 * m,) + Wk.shape[1:])
@@ -196,11 +204,11 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
         part["speed_position"] += np.einsum("obic,ob->ic", np.abs(G2), e[s - m: s + L + m + 1]) / (2 * m * dt)
         d_end = st_.get(s + L)  # sample s + L: the last boundary term |k'_{L-1}| |M_{L-1}| e_L
         part["gradient_position"] += dkp[L] * d_end["Eknot"]
-        Wi[r], mag[r] = acc, ab
+        Wi[r], mag[r], recon[r] = acc, ab, np.nextafter(jf * (1 + 2 * (L + 2) * 2.0**-53), np.inf)
         for name in PARTS:
             parts_i[name][r] = part[name]
         if progress is not None:
             progress(r + 1, R_)
     st_.evict(N)
 
-    return Wi, mag, np.zeros_like(mag), parts_i
+    return Wi, mag, recon, parts_i

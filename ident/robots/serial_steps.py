@@ -32,7 +32,7 @@ from numpy.lib.stride_tricks import as_strided
 from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.processing.weakform import Kernel
 
-__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_rows", "local_bounds", "q_remainder"]
+__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_rows", "local_bounds", "q_remainder", "speed_linear"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
@@ -42,7 +42,7 @@ PARTS = ("mass_motion", "coriolis_motion", "speed_motion", "mass_position", "cor
          "gradient_position")
 # per-step arrays of (n rows, 10 n columns) the window sums read, and the (n, n rows, 10 n columns) ones
 _KEEP = ("g0", "fg", "af0", "ag0", "A_mot", "A_pos", "H_mot", "H_pos", "Cmax", "Dloc", "Ecur", "B_mot", "B_pos",
-         "Eknot", "Ediff", "Mc", "aMc", "Jv")
+         "Eknot", "Ediff", "Mc", "aMc", "Jv", "Jc", "aJc", "Jk", "Jf")
 
 
 class StepGrid:
@@ -117,6 +117,40 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
                 fab[c, a, b] = Y(model, data, qq + (shifts[a] + shifts[b]), v, Z)
                 fab[c, b, a] = fab[c, a, b]
     return out
+
+
+def speed_linear(Jv, gam, gmag, vh, dq, e0, e1, qddm, dt):
+    """The speed's first-order term of ``h`` over a step, integrated exactly (per step, arrays over C steps).
+
+    On step j the Taylor expansion of ``h(q, v)`` at the speed estimate ``vh`` has the linear term ``Jv (v(t) -
+    vh)`` (``Jv = dh/dv (qh, vh)``, constant over the step). The kernel is linear on the step, ``k(t) = k_mid +
+    k' (t - t_mid)``, so ``int_step k v = K1 s_true + k' int (t - t_mid) (v(t) - v(t_mid))`` with ``s_true = (q_true(t_j+1)
+    - q_true(t_j)) / dt`` the step's mean speed (exact) and the last integral within ``qdd_max dt^3 / 12``. Hence
+    ``int_step k Jv (v - vh) = K1 Jv (s - vh) - K1 Jv (delta_j+1 - delta_j) / dt + Jv k' eps`` with ``s`` the
+    measured step speed (known: added to the row's centre, ``Jc``), the position errors ``delta`` (through the
+    row's exact gradient: the caller's summation by parts) and ``|eps| <= qdd_max dt^3 / 12`` (``Jk``, times
+    ``|k'|``). This replaces the bound ``K1 |Jv| qdd_max (dt / 4 + S / 4)`` of the speed estimate's truncation:
+    about ``9 T / dt`` times smaller for a triangle kernel of length T.
+
+    Jv (C, n, ...) and gam (C, n, n, ...) as computed; gmag (C, n, n, ...) the magnitudes pinocchio's values in each
+    Christoffel entry sum (its error ``PIN_REL`` of them); vh, dq, e0, e1 (C, n): speed estimate, measured step,
+    position-error bounds at the step's ends. Returns ``Jc`` (the centre term), ``aJc = |Jc|``, ``Jk`` (``sum_a
+    |Jv_a| qdd_max_a dt^3 / 12``) and ``Jf``: the bound of the centre term's own error (the computed Jv is within
+    ``2 PIN_REL sum_b gmag_ab |vh_b|`` and its float sum of the exact one; that error times ``|s - vh| + (e0 + e1) /
+    dt`` covers the centre and the exact gradient's use of the computed Jv; ``4 (n + 2) u`` for the products and
+    sums of the centre term).
+    """
+    C, n = vh.shape
+    s = dq / dt
+    dv = s - vh
+    Jc = np.einsum("sa...,sa->s...", Jv, dv)
+    aJv = np.abs(Jv)
+    Jk = np.einsum("sa...,a->s...", aJv, qddm) * (dt**3 / 12 * (1 + 4 * U))
+    eps = (2 * PIN_REL * np.einsum("sab...,sb->sa...", gmag, np.abs(vh))
+           + 4 * (n + 2) * U * np.einsum("sab...,sb->sa...", np.abs(gam), np.abs(vh)))
+    Jf = (np.einsum("sa...,sa->s...", eps, np.abs(dv) + (e0 + e1) / dt)
+          + 4 * (n + 2) * U * np.einsum("sa...,sa->s...", aJv, np.abs(dv) + np.abs(s) + np.abs(vh)))
+    return {"Jc": Jc, "aJc": np.abs(Jc), "Jk": Jk, "Jf": Jf}
 
 
 def q_remainder(fab, fk, f0, qh, vh, ev_max, dq_max, geo):
@@ -226,7 +260,13 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     dq_mean = sp * dt / 4 + qddm * dt**2 / 8
     dq_max = sp * dt / 2 + qddm * dt**2 / 8 + ebar
     rem_qq = q_remainder(p["fab"], p["fk"], f0, grid.qbar[J], vh, ev_max, dq_max, geo)
-    del p, Jq, dM, dJv
+    aY = np.abs(p["ha"])
+    gmag = np.abs(p["pair"])  # filled for a < b only: symmetric
+    gmag += np.swapaxes(gmag, 1, 2).copy()
+    gmag += aY[:, :, None] + aY[:, None, :]
+    gmag += 3 * np.abs(g0)[:, None, None]
+    lin = speed_linear(Jv, gam, gmag, vh, grid.dq[J], grid.e[J], grid.e[J + 1], qddm, dt)
+    del p, Jq, dM, dJv, aY, gmag
     c3 = (slice(None), None, None)
     # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order (Taylor: 1/2 of 4 M)
     dMq = np.einsum("skbic,b->skic", dMB, qddm)
@@ -239,8 +279,7 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     Q_mm = np.einsum("sabic,a,b->sic", absG, mot, mot)
     dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
     rem = (rem_qq + np.einsum("skaic,sk,sa->sic", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
-    H_mot = (np.einsum("skic,sk->sic", JqB, dq_mean) + np.einsum("saic,a->sic", np.abs(Jv), grid.ev_mot_mean)
-             + Q_mm + rem)
+    H_mot = np.einsum("skic,sk->sic", JqB, dq_mean) + Q_mm + rem  # Jv (v - vh): speed_linear
     # Q_all - Q_mm without the cancellation: ev_max = mot + ev_pos, so the difference is a sum of non-negative
     # products (|G| mot ev_pos twice and |G| ev_pos ev_pos)
     pos = grid.ev_pos[J]
@@ -252,7 +291,7 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot,
             "H_pos": H_pos, "Cmax": dlt.max(axis=1),
             "Dloc": np.einsum("sbic,sb->sic", dlt, np.abs(grid.dq[J]) + e[J] + e[J + 1]),
-            "Ecur": np.einsum("sbic,sb->sic", np.abs(Mc), e[J]), "Jv": Jv}
+            "Ecur": np.einsum("sbic,sb->sic", np.abs(Mc), e[J]), "Jv": Jv, **lin}
 
 
 def _sample_terms(grid: StepGrid, j0: int, cur: dict, Mc_prev, dlt_prev) -> dict:
@@ -362,14 +401,15 @@ def _correlations(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: in
     x = kw[:, 1:] - kw[:, :-1]
     u = x - wt["kp"][:, None] * _view(grid.dq, s0, R, stride, L)
     xs = np.abs(x).sum(axis=2)  # (R, L)
-    out = {"mass_motion": K1 @ V("A_mot"), "coriolis_motion": K1 @ V("H_mot"), "speed_motion": k[:L] @ V("B_mot"),
+    out = {"mass_motion": K1 @ V("A_mot"), "coriolis_motion": K1 @ V("H_mot") + akp @ V("Jk"),
+           "speed_motion": k[:L] @ V("B_mot"),
            "mass_position": K1 @ V("A_pos") + np.matmul(xs[:, None, :], V("Cmax"))[:, 0] + akp @ V("Dloc"),
            "coriolis_position": K1 @ V("H_pos"), "speed_position": k[:L] @ V("B_pos"),
            # measurement through the exact gradient of sum_j k'_j M_j dq_j (sample jj of the window)
            "gradient_position": dkp[0] * V("Ecur", 0, 1)[:, 0] + dkp[1:L] @ V("Eknot", 1, L - 1)
            + akp[1:L] @ V("Ediff", 1, L - 1) + dkp[L] * V("Eknot", L, 1)[:, 0],
-           "gK": (K1 - 1.0) @ V("g0"),
-           "mag": np.abs(K1 - 1.0) @ V("ag0"),
+           "gK": (K1 - 1.0) @ V("g0") + K1 @ V("Jc"),
+           "mag": np.abs(K1 - 1.0) @ V("ag0") + K1 @ V("aJc"), "Jf": K1 @ V("Jf"),
            "rsum": (1.0 + K1) @ V("ag0") + K1 @ V("af0")}
     return out, u
 
@@ -394,9 +434,9 @@ def _pair_terms(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: int,
     Y += np.matmul(u[:, :, None, :], V("Mc"))[:, :, 0]
     out = {"Wi": Y.sum(axis=1), "mag": np.abs(Y, out=Y).sum(axis=1)}
     out["rsum"] = np.einsum("rlb,rlbf->rf", np.abs(u), V("aMc"))
-    # h at the measured speed estimate: sum_j K1_j Jv_j (delta_{j+m} - delta_{j+1-m}) / S, summed by parts
-    out["cG"] = _shift_diff_sum(K1[:, None, None] * V("Jv"), _view(grid.e, int(starts[0]) + 1 - m, R, stride,
-                                                                      L + 2 * m - 1), 2 * m - 1) / grid.S
+    # the speed's linear term at the true step speeds (speed_linear): sum_j K1_j Jv_j (delta_{j+1} - delta_j) / dt,
+    # summed by parts
+    out["cG"] = _shift_diff_sum(K1[:, None, None] * V("Jv"), _view(grid.e, int(starts[0]), R, stride, L + 1), 1) / dt
     # the sample-instant secants w_j in sum_j k_j w_j (M_{j-1} - M_j): (delta_{j+m} - delta_{j-m}) / (2 m dt)
     Mw = V("Mc", -1, L + 2)
     dMhat = np.subtract(Mw[:, :-1], Mw[:, 1:])
@@ -445,7 +485,7 @@ def inertial_rows(robot, geo, q, e, spec, m: int, kern: Kernel, starts, progress
             rows = slice(b0 + r0, b0 + r0 + sub.size)
             out["Wi"][rows] = pair["Wi"] + cor["gK"]
             out["mag"][rows] = pair["mag"] + cor["mag"]
-            out["recon"][rows] = up((pair["rsum"] + cor["rsum"]) * c_rec)
+            out["recon"][rows] = up(up((pair["rsum"] + cor["rsum"]) * c_rec) + up(cor["Jf"] * (1 + 2 * (L + 2) * U)))
             for name in PARTS:
                 out[name][rows] = cor[name]
             out["coriolis_position"][rows] += pair["cG"]
