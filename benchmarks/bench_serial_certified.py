@@ -75,7 +75,38 @@ def urdf_path(arm: str, workdir: Path) -> Path:
     sys.exit(f"the URDF of {arm} was not found: pip install example-robot-data")
 
 
-def certified_run(csv, urdf, spec_toml, out, variant: str) -> tuple[dict, dict]:
+def hull_rounds(rounds: list | None):
+    """A context in which every round of the signed hull (one ``uncertain_hull_rows`` call) appends to ``rounds``:
+    its rows, seconds, LP iterations and the median width / prior width of the box it found (None: no record)."""
+    import contextlib
+
+    from h4bench.ident.estimators import uncertain_signed
+
+    @contextlib.contextmanager
+    def ctx():
+        if rounds is None:
+            yield
+            return
+        real = uncertain_signed.uncertain_hull_rows
+
+        def spy(W1, D1, y2, b2, prior, **kw):
+            t0 = time.perf_counter()
+            box, warm = real(W1, D1, y2, b2, prior, **kw)
+            rounds.append({"rows": int(W1.shape[0]), "seconds": time.perf_counter() - t0,
+                           "lp_iterations": int(box.info.get("lp_iterations", 0)),
+                           "width": (box.upper - box.lower).tolist()})
+            return box, warm
+
+        uncertain_signed.uncertain_hull_rows = spy
+        try:
+            yield
+        finally:
+            uncertain_signed.uncertain_hull_rows = real
+
+    return ctx()
+
+
+def certified_run(csv, urdf, spec_toml, out, variant: str, rounds: list | None = None) -> tuple[dict, dict]:
     """``identify --spec`` with the hull switches of ``variant``; returns (result, seconds: total/equation/hull and
     cpu, the process's CPU seconds: less sensitive than wall time to the other processes of a loaded machine)."""
     from h4bench.ident.estimators import hull, uncertain_signed
@@ -86,7 +117,8 @@ def certified_run(csv, urdf, spec_toml, out, variant: str) -> tuple[dict, dict]:
     hull.POOL_ENTRIES, uncertain_signed.WARM_ROWS = switch["POOL_ENTRIES"], switch["WARM_ROWS"]
     try:
         t0, c0 = time.perf_counter(), time.process_time()
-        res = identify_urdf_spec(csv, urdf, spec_toml, out=out)
+        with hull_rounds(rounds):
+            res = identify_urdf_spec(csv, urdf, spec_toml, out=out)
         total, cpu = time.perf_counter() - t0, time.process_time() - c0
     finally:
         hull.POOL_ENTRIES, uncertain_signed.WARM_ROWS = saved["POOL_ENTRIES"], saved["WARM_ROWS"]
@@ -132,7 +164,12 @@ def one_arm(arm: str, seconds: float, kernel_steps, workdir: Path, seed: int, re
     runs: dict = {v: [] for v in VARIANTS}
     for k in range(max(repeats, 1)):
         for v in (VARIANTS if repeats else ["new"]):
-            runs[v].append(certified_run(csv, urdf, spec_toml, workdir / f"{arm}-certified-{v}-{k}", v))
+            rounds = [] if (k == 0 and v == "new") else None
+            runs[v].append(certified_run(csv, urdf, spec_toml, workdir / f"{arm}-certified-{v}-{k}", v, rounds))
+            if rounds is not None:  # each round's hull width (its own box, before the intersection) / the prior's
+                out_rounds = [{**{k2: r[k2] for k2 in ("rows", "seconds", "lp_iterations")},
+                               "width_over_prior_median": float(np.median(np.asarray(r["width"]) / width0))}
+                              for r in rounds]
     cert, secs = runs["new"][0]
     t_cert = float(np.median([s["total"] for _, s in runs["new"]]))
     t0 = time.perf_counter()
@@ -155,6 +192,7 @@ def one_arm(arm: str, seconds: float, kernel_steps, workdir: Path, seed: int, re
         out["certified_over_tuned_median"] = float(np.median(ratio))
     if repeats:
         out["compare"] = compare(runs)
+    out["rounds"] = out_rounds
     return out
 
 
@@ -181,6 +219,9 @@ def main() -> None:
                   f"tuned {t.get('width_over_prior_median', float('nan')):.4g} (enclosed {t.get('enclosed')}, "
                   f"{r['seconds_tuned']:.1f} s); certified/tuned median {r.get('certified_over_tuned_median', float('nan')):.3g}",
                   flush=True)
+            for i, rd in enumerate(r["rounds"]):
+                print(f"  hull round {i + 1}: {rd['rows']} rows, {rd['seconds']:.1f} s, {rd['lp_iterations']} simplex "
+                      f"iterations, width/prior median {rd['width_over_prior_median']:.4g}", flush=True)
             if "compare" in r:
                 c = r["compare"]
                 for v in VARIANTS:

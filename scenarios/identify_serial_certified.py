@@ -6,9 +6,12 @@ resolution or significant digits, torque timing, torque error, stated qd_max and
 replaces ``--bound``: the derived interval equation (:mod:`ident.robots.serial_certified`) of the whole log,
 the Oettli-Prager hull in the physical prior (as ``--urdf`` documents), the stated motion bounds checked
 against the data, and the term that dominates the radii. An optional ``[certified]`` table (the H4's keys where
-they apply) sets the kernel: ``kernel_steps`` (even; default 0.08 s of samples), ``kernel_shape`` (``triangle``,
-the default, or ``hann``), ``stride`` [samples] (default 0.02 s) and ``refine`` (default 3: rounds of the hull
-with the last box as prior, :func:`ident.estimators.uncertain_signed.signed_uncertain_hull`).
+they apply) sets the kernel: ``kernel_steps`` (even; default none: every kernel of
+the serial family, :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle``,
+the default, or ``hann``), ``stride`` [samples] (default 0.02 s) and ``refine`` (default :data:`REFINE`: at most that
+many rounds of the hull with the last box as prior, until the widths' geometric mean shrinks by less than
+:data:`REFINE_RTOL`; the first rounds on every ``coarse_step``-th window only:
+:func:`ident.estimators.uncertain_signed.signed_uncertain_hull`).
 """
 
 from __future__ import annotations
@@ -26,10 +29,14 @@ from h4bench.scenarios.certified_verdict import (SERIAL_HINTS, contradicted_entr
 from h4bench.scenarios.identify import OptionError, read_serial_log, urdf_robot_and_prior
 from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
 
-__all__ = ["identify_urdf_spec", "read_kernel"]
+__all__ = ["REFINE", "REFINE_RTOL", "identify_urdf_spec", "read_kernel"]
 
 STRIDE_SECONDS = 0.02  # default row spacing [s]
 REFINE_RTOL = 0.02  # stop refining when the widths' geometric mean shrank by less than this in a round
+# at most this many rounds of the hull with the last box as prior: the box keeps shrinking for many rounds (each
+# round's chords of |theta| over a smaller box), so REFINE_RTOL, not this cap, ends them (per-round widths and
+# seconds: benchmarks/bench_serial_certified.py prints them)
+REFINE = 16
 _KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "refine": int}
 
 
@@ -37,7 +44,7 @@ def read_kernel(spec_path, dt: float) -> dict:
     """The optional ``[certified]`` table of the spec file for a serial robot: ``kernel_steps`` (even, >=
     :data:`ident.processing.choice.MIN_KERNEL_STEPS`; default None: the rows of every kernel of the serial family,
     :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle`` or ``hann``), ``stride`` [samples] (default 0.02 s),
-    ``refine`` (default 3); the H4's ``curvature_every`` does not apply. Errors name ``--spec`` and the file."""
+    ``refine`` (default :data:`REFINE`); the H4's ``curvature_every`` does not apply. Errors name ``--spec`` and the file."""
     path = Path(spec_path)
     try:
         table = tomllib.loads(path.read_text()).get("certified", {})
@@ -47,7 +54,7 @@ def read_kernel(spec_path, dt: float) -> dict:
         raise OptionError(f"--spec {path} [certified]: with --urdf expected some of {sorted(_KEYS)}, got "
                           f"{sorted(table) if isinstance(table, dict) else table!r}")
     out = {"kernel_steps": None, "kernel_shape": "triangle", "stride": max(1, int(round(STRIDE_SECONDS / dt))),
-           "refine": 3, **table}
+           "refine": REFINE, **table}
     for k, kind in _KEYS.items():
         if not (k == "kernel_steps" and out[k] is None) and (isinstance(out[k], bool) or not isinstance(out[k], kind)):
             raise OptionError(f"--spec {path} [certified].{k} must be {kind.__name__}, got {out[k]!r}")
@@ -76,7 +83,7 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     (``methods.certified``, ``error_model``, ``certified``; ``consistent`` False when the data contradict the
     spec: the hull's set is proven empty)."""
     from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
-    from h4bench.ident.estimators.uncertain_signed import signed_uncertain_hull
+    from h4bench.ident.estimators.uncertain_signed import coarse_step, signed_uncertain_hull
     from h4bench.ident.processing.motion_check import check_motion_bounds
     from h4bench.ident.robots.serial_certified import certified_equation, certified_family
 
@@ -131,8 +138,9 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     entry: dict = {"kind": "guaranteed", "rigorous": True}
     t1 = time.perf_counter()
     try:
+        windows = len(np.unique(eq.window, axis=0))
         box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]),
-                                    rtol=REFINE_RTOL)
+                                    rtol=REFINE_RTOL, coarse=coarse_step(windows), groups=eq.window)
     except ident.InconsistentDataError as exc:
         box = None
         scale = getattr(exc, "scale_lower", None)

@@ -12,17 +12,30 @@ import numpy as np
 
 from h4bench.ident.box import Box
 from h4bench.ident.estimators.hull import COUNTERS
-from h4bench.ident.estimators.uncertain import uncertain_hull_rows
+from h4bench.ident.estimators.uncertain import uncertain_hull_rows, warm_for_rows
 from h4bench.ident.numerics.interval import down, point_matvec, up
 from h4bench.portable import matmul as pmatmul
 
-__all__ = ["signed_uncertain_hull"]
+__all__ = ["COARSE_GROUPS", "coarse_step", "signed_uncertain_hull"]
 
 #: each round's hull LPs start from the previous round's working set and bases (False: from their own first rows)
 WARM_ROWS = True
+#: the first refinement rounds use about this many row groups (kernel windows), at least (:func:`coarse_step`); the
+#: per-round widths and seconds on fewer and on all rows: benchmarks/bench_serial_certified.py prints them
+COARSE_GROUPS = 256
 
 
-def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: float = 0.0):
+def coarse_step(n_groups: int) -> int:
+    """The thinning of the first rounds for ``n_groups`` row groups: the largest power of two ``<= n_groups /
+    COARSE_GROUPS`` (1: no thinning)."""
+    step = 1
+    while 2 * step * COARSE_GROUPS <= n_groups:
+        step *= 2
+    return step
+
+
+def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: float = 0.0, coarse: int = 1,
+                          coarse_rtol: float = 0.1, groups=None):
     """Oettli-Prager hull (:func:`ident.estimators.uncertain.uncertain_hull`) for a prior of any signs.
 
     The exact set ``{theta in Q : |y - Wc theta| <= bound + D |theta|}`` is not convex when a parameter's
@@ -40,12 +53,46 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
     a valid bound: each round's box encloses the set, and the next round's prior is that box). Each round's hull
     LPs start from the previous round's working set and each LP's basis there (the same stacked rows over a
     smaller box: the optima move little; a start that steers the LPs only).
+
+    coarse > 1: the first rounds use the rows of every ``coarse``-th group only (``groups``: one label per row,
+    integers (m,) or rows of integers (m, k), e.g. each row's window ``[first, last]`` sample so that all joints of
+    a window stay together, groups in the labels' sorted order; default each row its own group; fewer rows:
+    a larger set, so each such round's
+    box still encloses the exact one; it is only wider); when a round shrinks the widths' geometric mean by less
+    than ``coarse_rtol``, the next rounds use twice as many groups (every ``coarse // 2``-th, ...), and with all
+    rows the rounds go on until ``rtol``. The last round allowed by ``refine`` always uses all rows. The early
+    rounds, on a wide box, cost the most LP iterations: on fewer rows they cost a fraction of that.
+    ``info['coarse_rounds']`` counts the rounds on fewer rows.
     """
     Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
     lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
     names = prior.names
     box, warm = None, None
+    m_rows = Wc.shape[0]
+    bound_all = np.broadcast_to(np.asarray(bound, dtype=float), (m_rows,))
+    y_all, Wc_all, D_all = np.asarray(y, dtype=float), Wc, D
+    step, coarse_rounds = max(1, int(coarse)), 0  # rows used: those of every step-th group
+    if groups is None:
+        group = np.arange(m_rows)
+    else:
+        g = np.asarray(groups)
+        if g.shape[:1] != (m_rows,) or g.ndim > 2:
+            raise ValueError(f"groups must hold one label (an integer or a row of integers) per row ({m_rows}), got "
+                             f"shape {g.shape}")
+        group = np.unique(g, axis=0, return_inverse=True)[1].ravel()
+    sel = np.flatnonzero(group % step == 0)
     for it in range(int(refine) + 1):
+        if step > 1 and it == int(refine):  # the last round allowed: all rows
+            step = 1
+        new_sel = np.flatnonzero(group % step == 0) if step > 1 else np.arange(m_rows)
+        if new_sel.size > sel.size:  # more rows than the last round: its working set and bases, moved to them
+            warm = warm_for_rows(warm, sel, new_sel) if WARM_ROWS else None
+        sel = new_sel
+        if step > 1:
+            Wc, D, y, bound = Wc_all[sel], D_all[sel], y_all[sel], bound_all[sel]
+            coarse_rounds += 1
+        else:
+            Wc, D, y, bound = Wc_all, D_all, y_all, bound_all
         flip = np.abs(hi) < np.abs(lo)
         sg = np.where(flip, -1.0, 1.0)
         W1, lo1, hi1 = Wc * sg, np.where(flip, -hi, lo), np.where(flip, -lo, hi)  # exact: sign changes only
@@ -65,7 +112,7 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
         hi_f = np.nextafter(lo1 + sub.upper, np.inf)
         new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))
         new_hi = np.minimum(hi, np.where(flip, -lo_f, hi_f))
-        info = {**sub.info, "refinements": it}
+        info = {**sub.info, "refinements": it, "coarse_rounds": coarse_rounds}
         if box is not None:  # the LP work and the fallbacks of every round are counted
             for key in COUNTERS:
                 info[key] += box.info[key]
@@ -76,6 +123,10 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
         pos = (w_old > 0) & (w_new > 0)
         shrink = 1.0 - float(np.exp(np.mean(np.log(w_new[pos] / w_old[pos])))) if np.any(pos) else 0.0
         lo, hi = new_lo, new_hi
+        if step > 1:
+            if shrink < coarse_rtol:  # twice the groups from the next round
+                step //= 2
+            continue
         if it > 0 and shrink < rtol:
             break
     return box
