@@ -43,7 +43,7 @@ from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
 from h4bench.portable import matmul as pmatmul
 from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
 
-__all__ = ["uncertain_hull", "uncertain_hull_rows", "warm_for_rows"]
+__all__ = ["uncertain_hull", "uncertain_hull_rows"]
 
 
 # ----------------------------------------------------------------------------------------------- checks
@@ -122,23 +122,6 @@ def _op_upper(W_lo, W_hi, y, b, theta) -> float:
 def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     """Guaranteed box enclosing the Oettli-Prager set (:func:`uncertain_hull_rows` without its warm start)."""
     return uncertain_hull_rows(Wc, D, y, bound, prior, lp_tol=lp_tol)[0]
-
-
-def warm_for_rows(warm: HullWarm | None, rows_from, rows_to) -> HullWarm | None:
-    """The warm start of :func:`uncertain_hull_rows` on the rows ``rows_from`` (indices into a larger system) moved
-    to the same system's rows ``rows_to`` (a superset, both increasing): each row keeps its place in the working
-    set and the bases, its index follows the stacking ``[W_lo; W_hi]`` of the larger row set. None if ``warm`` is
-    None."""
-    if warm is None:
-        return None
-    rows_from, rows_to = np.asarray(rows_from), np.asarray(rows_to)
-    pos = np.searchsorted(rows_to, rows_from)
-    if np.any(pos >= rows_to.size) or np.any(rows_to[np.minimum(pos, rows_to.size - 1)] != rows_from):
-        raise ValueError("rows_to must hold every row of rows_from")
-    r = np.asarray(warm.rows)
-    lo_part = r < rows_from.size
-    moved = np.where(lo_part, pos[np.where(lo_part, r, 0)], rows_to.size + pos[np.where(lo_part, 0, r - rows_from.size)])
-    return HullWarm(rows=moved, bases=list(warm.bases))
 
 
 def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: HullWarm | None = None

@@ -12,7 +12,7 @@ import numpy as np
 
 from h4bench.ident.box import Box
 from h4bench.ident.estimators.hull import COUNTERS
-from h4bench.ident.estimators.uncertain import uncertain_hull_rows, warm_for_rows
+from h4bench.ident.estimators.uncertain import uncertain_hull_rows
 from h4bench.ident.numerics.interval import down, point_matvec, up
 from h4bench.portable import matmul as pmatmul
 
@@ -85,8 +85,11 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
         if step > 1 and it == int(refine):  # the last round allowed: all rows
             step = 1
         new_sel = np.flatnonzero(group % step == 0) if step > 1 else np.arange(m_rows)
-        if new_sel.size > sel.size:  # more rows than the last round: its working set and bases, moved to them
-            warm = warm_for_rows(warm, sel, new_sel) if WARM_ROWS else None
+        if new_sel.size > sel.size:  # more rows than the last round: a cold start (the last round's working set
+            # and bases, moved to the new rows, made the LPs slower: benchmarks/bench_serial_certified.py prints each
+            # round's simplex iterations; on a UR5 log at 58b3069 169 041 + 221 058 for the first rounds on half and
+            # on all of the windows, against the cold start's figures in the module docstring of that benchmark)
+            warm = None
         sel = new_sel
         if step > 1:
             Wc, D, y, bound = Wc_all[sel], D_all[sel], y_all[sel], bound_all[sel]

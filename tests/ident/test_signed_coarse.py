@@ -1,5 +1,4 @@
-"""The signed Oettli-Prager hull's first rounds on fewer rows (``coarse``, ``groups``) and the warm start moved to
-more rows (:func:`ident.estimators.uncertain.warm_for_rows`).
+"""The signed Oettli-Prager hull's first rounds on fewer rows (``coarse``, ``groups``).
 
 Oracle: random points of the exact Oettli-Prager set (``|y - Wc theta| <= b + D |theta|``, checked directly) must
 lie in every box; the rounds' row counts are read from the rounds themselves.
@@ -12,8 +11,6 @@ import pytest
 
 from h4bench import ident
 from h4bench.ident.estimators import uncertain_signed
-from h4bench.ident.estimators.hull import HullWarm
-from h4bench.ident.estimators.uncertain import warm_for_rows
 from h4bench.ident.estimators.uncertain_signed import COARSE_GROUPS, coarse_step, signed_uncertain_hull
 
 
@@ -26,17 +23,6 @@ def _problem(windows=400, per=3, p=4, seed=2):
     y = Wc @ theta0 + rng.uniform(-0.3, 0.3, m)
     window = np.repeat(np.stack([np.arange(windows) * 10, np.arange(windows) * 10 + 40], axis=1), per, axis=0)
     return Wc, D, y, np.full(m, 0.3), theta0, window, rng
-
-
-def test_warm_for_rows_keeps_each_row_and_follows_the_stacking():
-    warm = HullWarm(rows=np.array([0, 2, 3, 5]), bases=[None, ("c", "r")])
-    moved = warm_for_rows(warm, np.array([0, 4, 8]), np.array([0, 2, 4, 6, 8]))
-    # stacked [W_lo; W_hi]: 3 rows -> 6 entries, 5 rows -> 10; row 8 is the 5th of the larger set
-    assert moved.rows.tolist() == [0, 4, 5, 9]
-    assert moved.bases == warm.bases
-    assert warm_for_rows(None, [0], [0, 1]) is None
-    with pytest.raises(ValueError, match="rows_to must hold every row"):
-        warm_for_rows(warm, np.array([0, 3, 8]), np.array([0, 2, 4, 6, 8]))
 
 
 def test_coarse_step_is_the_largest_power_of_two_within_the_groups():
