@@ -26,23 +26,36 @@ former's width (signed: > 0 where the new box is narrower). The tuned command ru
     python benchmarks/bench_serial_certified.py [--arms ur5,panda] [--seconds 12] [--kernel-steps N] [--out F]
                                                 [--compare] [--repeats 1]
 
-Measured at 3217b55 with ``--compare --repeats 1 --threads 1`` (2 cores shared with other jobs, load 2-4, so
-the wall times are inflated and noisy: the same equation took 74 s and 46 s in the UR5's two runs), 12 s logs,
-the kernel family (6324 rows for the UR5, 58 base parameters; the Panda 69):
+Printed per arm also: each round of the certified hull (its rows: the first rounds on every k-th kernel window,
+:func:`ident.estimators.uncertain_signed.coarse_step`; seconds; simplex iterations; the median of its box's
+width over the prior's).
 
-======  ==========  ===================  ==============  ==============  =====  ========================
-arm     variant     identify --spec [s]  equation [s]    hull [s]        LP     box
-======  ==========  ===================  ==============  ==============  =====  ========================
-UR5     former      649                  74              573             2364   width/prior 0.0737
-UR5     new         218 (0.34)           46              171 (0.30)      1251   endpoints within 1.6e-8
-Panda   former      592                  53              539             3106   width/prior 0.196
-Panda   new         285 (0.48)           50              234 (0.43)      1476   endpoints within 9.7e-8
-======  ==========  ===================  ==============  ==============  =====  ========================
+Measured with ``--threads 1``, 12 s logs, the kernel family (6324 rows for the UR5, 58 base parameters; the Panda
+7378 rows, 69), each run sharing the 2-core machine with one other job:
 
-(LP: HiGHS runs; 0 fallbacks in all four; the Panda's new run had 2 runs stopped at their budget, both solved
-by the cold retry; box: the largest endpoint difference relative to the former width, the new box narrower by at
-most 1.6e-8 (UR5) and 4.3e-8 (Panda) of it: both are safe dual bounds, the new LPs end closer to the optima).
-The UR5's hull alone on the same equation, in one process, by CPU time: former 260 s (893 327 simplex
+======  =======  ===================  ============  ========  =====  ===========  ================  ========
+arm     commit   identify --spec [s]  equation [s]  hull [s]  LP     width/prior  certified/tuned   enclosed
+======  =======  ===================  ============  ========  =====  ===========  ================  ========
+UR5     3217b55  218                  46            171       1251   0.0737       1.64              58/58
+UR5     6fc8ab8  139                  39            99        1904   0.0438       1.13              58/58
+Panda   40b2d46  255                  53            201       1490   0.196        4.65              69/69
+Panda   6fc8ab8  247                  66            181       2532   0.0426       1.21              69/69
+======  =======  ===================  ============  ========  =====  ===========  ================  ========
+
+(LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio,
+the tuned hull at the true torque bound 0.8 N m, 4.6 s for the UR5 and 6.5 s for the Panda. The UR5's first row
+is the earlier table's ``new`` run at 3217b55.) What changed: the q-q remainder of the Coriolis and gravity terms
+bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated exactly (1b54bd7), and
+the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069, 6fc8ab8). At 6fc8ab8
+the Panda's hull took 9 rounds (median width / prior after each: 0.711, 0.229, 0.110, 0.0619, 0.0533, 0.0470 on
+1848 rows, 0.0448 on 3689, 0.0434 and 0.0426 on all 7378), the UR5's 8 (0.395 ... 0.0461 on 1584 rows, 0.0450
+on 3162, 0.0441 and 0.0438 on 6324); the first round on all rows cost 45 s (UR5) and 77 s (Panda) of the 99 and
+181 s.
+
+``--compare`` (the hull's LP switches against their state at 7b00d11) was measured at 3217b55 with ``--repeats 1``
+(load 2-4): UR5 649 s former against 218 s new (hull 573 s against 171 s, 2364 against 1251 HiGHS runs, the boxes
+within 1.6e-8 of each width); Panda 592 s against 285 s (hull 539 against 234 s, 3106 against 1476 runs, within
+9.7e-8). The UR5's hull alone on the same equation, in one process, by CPU time: former 260 s (893 327 simplex
 iterations, final working set 6618 rows), new 110 s (299 585 iterations, 4420 rows).
 """
 

@@ -153,8 +153,9 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
         rel = box.width / (prior.upper - prior.lower)
         entry.update(status="ok", lower=box.lower.tolist(), upper=box.upper.tolist(), width=box.width.tolist(),
                      relative_width_to_prior=rel.tolist(), narrowed_parameters=int(np.sum(rel < 0.99)),
-                     info={k: box.info.get(k) for k in ("nonempty_proven", "refinements", "lp_solves", "lp_limit_hits",
-                                                        "lp_retries", "lp_fallbacks", "lp_fallback_parameters")})
+                     info={k: box.info.get(k) for k in ("nonempty_proven", "refinements", "coarse_rounds", "lp_solves",
+                                                        "lp_limit_hits", "lp_retries", "lp_fallbacks",
+                                                        "lp_fallback_parameters")})
     entry["seconds"] = time.perf_counter() - t1
     theta_abs = (np.maximum(np.abs(box.lower), np.abs(box.upper)) if box is not None
                  else np.maximum(np.abs(prior.lower), np.abs(prior.upper)))
