@@ -45,8 +45,8 @@ halves of such derivatives: ``|Gamma| <= 3 (1 + R^2)``, hence ``|h| <= 3 (1 + R^
 <= 6 (1 + R^2) sum|v|`` and (Bernstein again) ``|dh/dq_k| <= 6 (1 + R^2) (sum|v|)^2``; gravity
 ``|g| <= |g0| sqrt(1 + R^2)``, ``|dg/dq_k| <= 2 |g0| sqrt(1 + R^2)``. These are global (any configuration), hence
 loose, but they only multiply ``dt``, e and the speed-estimate error. The one that multiplied only a step's squared
-displacement, the q-q second-order remainder of ``h + g`` (``4 (gamma (sum|v|)^2 + g)`` per entry, about 1e4x the
-local second derivatives on a 7-joint arm at 1 kHz), is bounded locally instead: the step's forward-difference
+displacement, the q-q second-order remainder of ``h + g`` (``4 (gamma (sum|v|)^2 + g)`` per entry, far above the
+local second derivatives), is bounded locally instead: the step's forward-difference
 Hessian, the global bounds left only on the third order and on the speed's deviation
 (:func:`ident.robots.serial_steps.q_remainder`). Taylor's remainders carry their factor 1/2. Columns of link i
 vanish on the rows of joints after i (structural zeros keep radius 0). **Stated, not proven**: pinocchio's floating-point error

@@ -176,9 +176,9 @@ def q_remainder(fab, fk, f0, qh, vh, ev_max, dq_max, geo):
     * from vh to v: ``h(q, v) - h(q, vh) = sum_ab Gamma_ab (v_a v_b - vh_a vh_b)`` and ``|d2 Gamma / dq2| <= 4
       gamma``: ``4 gamma (2 sum|vh| sum ev_max + (sum ev_max)^2)``.
 
-    The global bound it replaces, ``4 (gamma (sum|v|)^2 + g)`` for every entry, is about 1e4x the local
-    second derivatives on the arms measured (a 7-joint arm, 1 kHz): the terms left global here multiply one
-    more small factor (a step's displacement, or the speed estimate's error).
+    The global bound it replaces, ``4 (gamma (sum|v|)^2 + g)`` for every entry, is far above the local second
+    derivatives (tests/ident/test_serial_remainder.py compares both with sampled remainders): the terms left
+    global here multiply one more small factor (a step's displacement, or the speed estimate's error).
     """
     eta = ETA
     C, n = qh.shape
