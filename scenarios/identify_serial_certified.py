@@ -43,8 +43,9 @@ _KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "refine": int}
 def read_kernel(spec_path, dt: float) -> dict:
     """The optional ``[certified]`` table of the spec file for a serial robot: ``kernel_steps`` (even, >=
     :data:`ident.processing.choice.MIN_KERNEL_STEPS`; default None: the rows of every kernel of the serial family,
-    :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle`` or ``hann``), ``stride`` [samples] (default 0.02 s),
-    ``refine`` (default :data:`REFINE`); the H4's ``curvature_every`` does not apply. Errors name ``--spec`` and the file."""
+    :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle`` or ``hann``),
+    ``stride`` [samples] (default 0.02 s), ``refine`` (default :data:`REFINE`); the H4's ``curvature_every`` does
+    not apply. Errors name ``--spec`` and the file."""
     path = Path(spec_path)
     try:
         table = tomllib.loads(path.read_text()).get("certified", {})

@@ -124,8 +124,9 @@ def speed_linear(Jv, gam, gmag, vh, dq, e0, e1, qddm, dt):
 
     On step j the Taylor expansion of ``h(q, v)`` at the speed estimate ``vh`` has the linear term ``Jv (v(t) -
     vh)`` (``Jv = dh/dv (qh, vh)``, constant over the step). The kernel is linear on the step, ``k(t) = k_mid +
-    k' (t - t_mid)``, so ``int_step k v = K1 s_true + k' int (t - t_mid) (v(t) - v(t_mid))`` with ``s_true = (q_true(t_j+1)
-    - q_true(t_j)) / dt`` the step's mean speed (exact) and the last integral within ``qdd_max dt^3 / 12``. Hence
+    k' (t - t_mid)``, so ``int_step k v = K1 s_true + k' int (t - t_mid) (v(t) - v(t_mid))`` with ``s_true =
+    (q_true(t_j+1) - q_true(t_j)) / dt`` the step's mean speed (exact) and the last integral within ``qdd_max dt^3
+    / 12``. Hence
     ``int_step k Jv (v - vh) = K1 Jv (s - vh) - K1 Jv (delta_j+1 - delta_j) / dt + Jv k' eps`` with ``s`` the
     measured step speed (known: added to the row's centre, ``Jc``), the position errors ``delta`` (through the
     row's exact gradient: the caller's summation by parts) and ``|eps| <= qdd_max dt^3 / 12`` (``Jk``, times
