@@ -124,9 +124,14 @@ def verdict_lines(result: dict) -> list[str]:
     return lines
 
 
-def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float) -> ErrorSpec:
+def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, tau_logged=None) -> ErrorSpec:
     """The simulated robot's ErrorSpec: its sensor facts from the simulator's settings, its motion bounds stated
-    from the reference (see the module docstring); ``sources`` says which is which."""
+    from the reference (see the module docstring); ``sources`` says which is which.
+
+    tau_logged : (N, 4) the logged torques, or None. The simulator adds the injected error to the command in
+    floating point, so ``|applied - logged|`` exceeds ``noise.bound`` by up to half an ulp of the applied torque
+    (a square wave at its bound does: 1.3 + 7e-15 N m); with the log given, the derived torque error is
+    ``noise.bound + 2^-52 (max |tau_logged| + noise.bound)``, which covers it."""
     em = spec["error_model"]
     counts = int(em["counts_per_turn"]) or int(spec["encoder"]["counts_per_turn"])
     if counts < 1:
@@ -136,13 +141,19 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float) -
         if not (np.isfinite(em[key]) and em[key] >= 1.0):
             raise ScenarioError(f"error_model.{key} must be a number >= 1 (a tracking margin), got {em[key]!r}")
     torque = float(em["torque_error"]) or float(noise_bound)
+    rounding = not em["torque_error"] and tau_logged is not None
+    if rounding:  # the applied torque's float sum (docstring)
+        ulp = np.nextafter(2.0**-52 * (float(np.max(np.abs(tau_logged))) + torque), np.inf)
+        torque = float(np.nextafter(torque + ulp, np.inf))
     qd = float(em["qd_max"]) or em["motion_margin_qd"] * np.abs(np.asarray(reference.qd)).max(axis=0)
     qdd = float(em["qdd_max"]) or em["motion_margin_qdd"] * np.abs(np.asarray(reference.qdd)).max(axis=0)
     sources = {
         "position_resolution": f"the simulator's encoder: {counts} counts per turn, rounded to the nearest count",
         "sample_period": "the simulator's sample period (torques held over each step)",
         "torque_error": ("stated in error_model.torque_error" if em["torque_error"] else
-                         "the injected torque error's rigorous bound (noise.bound)"),
+                         "the injected torque error's rigorous bound (noise.bound)" + (
+                             " plus the float rounding of the applied torque (2^-52 of the largest |tau|)"
+                             if rounding else "")),
         "qd_max": (f"stated: {em['motion_margin_qd']:g} x the reference trajectory's peak |qd| per joint (tracking "
                    "margin), checked against the truth" if not em["qd_max"] else "stated in error_model.qd_max"),
         "qdd_max": (f"stated: {em['motion_margin_qdd']:g} x the reference trajectory's peak |qdd| per joint "
@@ -171,7 +182,7 @@ def certify(run_, spec: dict) -> dict:
     """The certified box of an experiment run, judged, with its certificate; adds ``certified`` to the run's
     boxes and returns the extra result keys (``certificate``, ``error_model``, ``width_vs_tuned_geomean``,
     ``methods.certified``)."""
-    error_spec = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound)
+    error_spec = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound, run_.dataset.tau)
     processing = processing_of(spec)
     t0 = time.perf_counter()
     ceq = certified_equation(run_.geometry, run_.dataset.q, run_.dataset.tau, error_spec, processing)

@@ -117,7 +117,7 @@ def run_error_spec(run_dir):
                           "bound): not a simulated run")
     spec = {"error_model": dict(defaults["error_model"]),
             "encoder": {"counts_per_turn": dataset.metadata.get("encoder_counts") or 0}}
-    return simulated_error_spec(spec, reference, dataset.dt, float(noise["bound"])), certified
+    return simulated_error_spec(spec, reference, dataset.dt, float(noise["bound"]), dataset.tau), certified
 
 
 def _load_dataset(run_dir: Path):

@@ -311,3 +311,20 @@ def test_run_certified_with_an_understated_qd_max_exits_1(tmp_path):
     assert res.exit_code == 1, res.output
     first = (tmp_path / "r" / "report.md").read_text().splitlines()
     assert first[0].startswith("**Certified box: FAILED**") and first[2].startswith("- qd_max of joint 1 = 3 rad/s")
+
+
+def test_the_derived_torque_error_covers_the_float_sum_of_a_square_wave_at_its_bound(run_and_spec):
+    """The simulator applies ``command + error`` in floating point: a square wave at its bound gives
+    ``|applied - logged|`` half an ulp above ``noise.bound`` (the oracle: that difference, formed here as the
+    simulator forms it). The derived torque error covers it; without the log it is the bound itself."""
+    run_, spec = run_and_spec
+    rng = np.random.default_rng(0)
+    logged = rng.uniform(-40.0, 40.0, (5000, 4))
+    bound = 1.3
+    applied = logged + np.where(rng.random((5000, 4)) < 0.5, -bound, bound)
+    actual = np.abs(applied - logged).max()
+    assert actual > bound  # the float sum: the bound alone would be an understated torque_error
+    es = simulated_error_spec(spec, run_.reference, run_.dataset.dt, bound, logged)
+    assert np.all(es.torque_error >= actual) and np.all(es.torque_error < bound * (1 + 1e-12))
+    assert "float rounding" in es.sources["torque_error"]
+    assert np.all(simulated_error_spec(spec, run_.reference, run_.dataset.dt, bound).torque_error == bound)
