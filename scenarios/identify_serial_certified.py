@@ -28,6 +28,7 @@ from h4bench.scenarios.certified_verdict import (SERIAL_HINTS, contradicted_entr
                                                  row_radius_summary)
 from h4bench.scenarios.identify import OptionError, read_serial_log, urdf_robot_and_prior
 from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
+from h4bench.scenarios.threads import hull_processes
 
 __all__ = ["REFINE", "REFINE_RTOL", "identify_urdf_spec", "read_kernel"]
 
@@ -141,7 +142,8 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     try:
         windows = len(np.unique(eq.window, axis=0))
         box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]),
-                                    rtol=REFINE_RTOL, coarse=coarse_step(windows), groups=eq.window)
+                                    rtol=REFINE_RTOL, coarse=coarse_step(windows), groups=eq.window,
+                                    processes=hull_processes())
     except ident.InconsistentDataError as exc:
         box = None
         scale = getattr(exc, "scale_lower", None)

@@ -15,7 +15,7 @@ import contextlib
 
 from h4bench.blas import openblas_libraries
 
-__all__ = ["original_blas_threads", "single_blas_thread"]
+__all__ = ["hull_processes", "original_blas_threads", "single_blas_thread"]
 
 #: library path -> (setter, thread count found by :func:`single_blas_thread`)
 _ORIGINAL: dict = {}
@@ -47,3 +47,20 @@ def original_blas_threads():
     finally:
         for setter, _ in _ORIGINAL.values():
             setter(1)
+
+
+def hull_processes() -> int:
+    """The processes of a signed hull's two halves (:mod:`ident.estimators.hull_split`; speed only: 1 and 2 give
+    the same box): ``H4BENCH_HULL_PROCESSES`` (1 or 2) if set, else 2 when this process may use 2 cores or more."""
+    import os
+
+    env = os.environ.get("H4BENCH_HULL_PROCESSES")
+    if env is not None:
+        if env not in ("1", "2"):
+            raise ValueError(f"H4BENCH_HULL_PROCESSES must be 1 or 2, got {env!r}")
+        return int(env)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    return 2 if cores >= 2 else 1

@@ -88,11 +88,12 @@ def _coverage(eq, box, bound):
 def _hull(eq, bound, prior, refine, rtol):
     from h4bench.ident import InconsistentDataError
     from h4bench.ident.estimators.uncertain_signed import coarse_step, signed_uncertain_hull
+    from h4bench.scenarios.threads import hull_processes
 
     try:
         coarse = coarse_step(len(np.unique(eq.window, axis=0)))
         return signed_uncertain_hull(eq.Wc, eq.D, eq.y, bound, prior, refine=refine, rtol=rtol, coarse=coarse,
-                                     groups=eq.window), None
+                                     groups=eq.window, processes=hull_processes()), None
     except InconsistentDataError as exc:
         return None, str(exc)
 

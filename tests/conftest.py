@@ -9,6 +9,8 @@ import os
 # at any thread count, tests/test_blas_independence.py)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+# likewise one process for a signed hull's two halves (ident.estimators.hull_split: the same box with 1 or 2)
+os.environ.setdefault("H4BENCH_HULL_PROCESSES", "1")
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402

@@ -351,6 +351,7 @@ def interval_hull(
     max_rounds: int = 100,
     lp_budget: dict | None = None,
     warm: HullWarm | None = None,
+    lps=None,
 ) -> HullResult:
     """Rigorous outer enclosure (tight to the LP tolerances) of the hull of ``{x in Q : bl <= W x <= bu}``.
 
@@ -397,7 +398,9 @@ def interval_hull(
     ``info['lp_failures']`` (a model it rejects also sets ``info['lp_error']``, the message). ``info`` also
     carries the model's counters ``lp_solves``, ``lp_iterations``, ``lp_limit_hits``, ``lp_retries``,
     ``lp_fallbacks`` (:meth:`~ident.numerics.lp.LPModel.counters`). ``warm`` holds the final working set and
-    each LP's last optimal basis (:class:`HullWarm`).
+    each LP's last optimal basis (:class:`HullWarm`). ``lps``: solve these of the 2p LPs only (LP j < p: the
+    lower endpoint of parameter j, p + j its upper); the others keep the prior's endpoint
+    (:mod:`ident.estimators.hull_split` runs the minima and the maxima as two such halves).
     """
     t0 = time.perf_counter()
     n_rows, p = W.shape
@@ -434,6 +437,8 @@ def interval_hull(
     final: list = [None] * n_lp  # LP j's basis after its last optimal solve (for a later warm start)
     lp_error, model, ws, rounds, infeasible = None, None, None, 0, False
     todo = list(range(p)) + [p + i for i in reversed(range(p))]  # minima, then maxima in reverse: close optima
+    if lps is not None:  # some of the LPs only (the others' endpoints stay at the prior)
+        todo = [j for j in todo if j in set(int(i) for i in lps)]
     try:
         model = LPModel(prior_lo, prior_hi, center=theta0, col_scale=d, tolerance=lp_tol,
                         dual_after_rows=DUAL_AFTER_ROWS, **PRIMAL_SIMPLEX, **(lp_budget or {}))

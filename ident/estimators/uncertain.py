@@ -124,8 +124,8 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
     return uncertain_hull_rows(Wc, D, y, bound, prior, lp_tol=lp_tol)[0]
 
 
-def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: HullWarm | None = None
-                        ) -> tuple[Box, HullWarm | None]:
+def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: HullWarm | None = None,
+                        split=None) -> tuple[Box, HullWarm | None]:
     """Guaranteed box enclosing ``S = {theta in Q : exists W in [Wc - D, Wc + D], |y - W theta| <= bound}``.
 
     Wc : (m, p) centre regressor; D : (m, p) or scalar radius >= 0 (units of W); y : (m,); bound : scalar or
@@ -142,6 +142,8 @@ def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: H
     warm : the warm start of the hull LPs (:class:`~ident.estimators.hull.HullWarm`, rows of the 2m stacked rows
     ``[W_lo; W_hi]``), e.g. of the same system over a larger prior; it steers the LPs only, the box is rigorous
     whatever it is. Returns ``(box, warm)``: the hull's own warm start (None when its LPs did not run through).
+    split : a :class:`~ident.estimators.hull_split.HullSplit`: the minima and the maxima as two hulls (in two
+    processes if it has them; ``warm`` is then its :class:`~ident.estimators.hull_split.SplitWarm`).
     """
     t0 = time.perf_counter()
     Wc, D, y = _check_interval_matrix(Wc, D, y)
@@ -188,6 +190,8 @@ def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: H
 
     def hull(factor, start):
         rows = (A, BL, BU) if factor == 1.0 else stacked(b * factor)
+        if split is not None:
+            return split.hull(*rows, lo, hi, scale=rows_b * factor, center=start, lp_tol=lp_tol, warm=warm)
         return interval_hull(*rows, lo, hi, scale=rows_b * factor, center=start, lp_tol=lp_tol, warm=warm)
 
     def fallback(what):

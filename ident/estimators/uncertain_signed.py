@@ -35,7 +35,7 @@ def coarse_step(n_groups: int) -> int:
 
 
 def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: float = 0.0, coarse: int = 1,
-                          coarse_rtol: float = 0.1, groups=None):
+                          coarse_rtol: float = 0.1, groups=None, processes: int | None = None):
     """Oettli-Prager hull (:func:`ident.estimators.uncertain.uncertain_hull`) for a prior of any signs.
 
     The exact set ``{theta in Q : |y - Wc theta| <= bound + D |theta|}`` is not convex when a parameter's
@@ -63,7 +63,19 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
     rows the rounds go on until ``rtol``. The last round allowed by ``refine`` always uses all rows. The early
     rounds, on a wide box, cost the most LP iterations: on fewer rows they cost a fraction of that.
     ``info['coarse_rounds']`` counts the rounds on fewer rows.
+
+    processes : None, every round's 2p LPs on one HiGHS model; 1 or 2, as two halves (the minima and the maxima,
+    :mod:`ident.estimators.hull_split`), in two processes with 2: the same box with 1 or 2.
     """
+    if processes is None:
+        return _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, None)
+    from h4bench.ident.estimators.hull_split import HullSplit
+
+    with HullSplit(int(processes)) as split:
+        return _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, split)
+
+
+def _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, split):
     Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
     lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
     names = prior.names
@@ -110,7 +122,7 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
         extra = up(up(y2hi - y2lo) + up(pmatmul(D, np.abs(lo1))) * (1 + 4 * Wc.shape[1] * 2.0**-53))
         b2 = up(np.asarray(bound, dtype=float) + extra)
         sub, warm = uncertain_hull_rows(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names),
-                                        warm=warm if WARM_ROWS else None)
+                                        warm=warm if WARM_ROWS else None, split=split)
         lo_f = np.nextafter(lo1 + sub.lower, -np.inf)
         hi_f = np.nextafter(lo1 + sub.upper, np.inf)
         new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))
