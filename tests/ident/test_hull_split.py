@@ -63,3 +63,17 @@ def test_one_or_two_processes_give_the_same_bits_and_enclose_the_set(coarse):
 def test_processes_other_than_one_or_two_are_refused():
     with pytest.raises(ValueError, match="processes must be 1 or 2"):
         HullSplit(3)
+
+
+def test_an_error_in_the_block_stops_the_worker():
+    W = np.random.default_rng(1).normal(size=(400, 4))
+    c = W @ np.ones(4)
+    with pytest.raises(RuntimeError, match="stop"):
+        with HullSplit(2) as split:
+            split.hull(W, c - 0.5, c + 0.5, -5 * np.ones(4), 5 * np.ones(4))
+            procs = list(split._pool._processes.values())
+            assert procs and all(p.is_alive() for p in procs)
+            raise RuntimeError("stop")
+    for p in procs:
+        p.join(timeout=10)
+        assert not p.is_alive()
