@@ -288,7 +288,8 @@ def identify(
                                        torque_timing, pairs)
         elif spec is not None:
             result = _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset,
-                                    coupled_wrist, cutoff_hz, decimation, prior, model, out, pairs, torque_timing)
+                                    coupled_wrist, cutoff_hz, decimation, prior, model, out, pairs, torque_timing,
+                                    as_json)
         elif bound is None:
             raise OptionError("--bound is required (or --spec FILE for the certified box), got neither")
         elif urdf is not None:
@@ -387,7 +388,7 @@ def _exit_if_failed(result: dict, code: int) -> None:
 
 
 def _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,
-                   decimation, prior, model, out, pairs, torque_timing) -> dict:
+                   decimation, prior, model, out, pairs, torque_timing, as_json=False) -> dict:
     """``--urdf ... --spec``: the certified box of a serial robot (:mod:`scenarios.identify_serial_certified`); options
     of the tuned path are refused."""
     from h4bench.scenarios.identify import OptionError, parse_number
@@ -403,11 +404,12 @@ def _identify_spec(file, urdf, spec, bound, method, mass, reach, friction, rotor
     n = _urdf_joints(urdf)
     from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
 
-    return identify_urdf_spec(file, urdf, spec,
-                              mass=None if mass is None else parse_number(mass, "--mass", positive=True),
-                              reach=None if reach is None else parse_number(reach, "--reach", positive=True),
-                              friction=friction, rotor_inertia=rotor, offset=offset,
-                              coupled_wrist=_coupled_wrist(coupled_wrist, n), out=out)
+    kw = dict(mass=None if mass is None else parse_number(mass, "--mass", positive=True),
+              reach=None if reach is None else parse_number(reach, "--reach", positive=True),
+              friction=friction, rotor_inertia=rotor, offset=offset, coupled_wrist=_coupled_wrist(coupled_wrist, n),
+              out=out)
+    with Progress(enabled=not as_json and sys.stderr.isatty()) as progress:  # minutes on a 6-7 joint arm
+        return identify_urdf_spec(file, urdf, spec, progress=progress, **kw)
 
 
 def _identify_urdf(file, urdf, bound, method, mass, reach, friction, rotor, offset, coupled_wrist, cutoff_hz,

@@ -79,17 +79,22 @@ def read_kernel(spec_path, dt: float) -> dict:
 
 
 def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction: bool = True,
-                       rotor_inertia: bool = True, offset: bool = True, coupled_wrist=None, out=None) -> dict:
+                       rotor_inertia: bool = True, offset: bool = True, coupled_wrist=None, out=None,
+                       progress=None) -> dict:
     """The certified box of a joint-side CSV log (``t, q1..qn, tau1..taun``) of the serial robot ``urdf`` under the
     error specification ``spec_path``; writes ``result.json`` into ``out``. Returns the result dict
     (``methods.certified``, ``error_model``, ``certified``; ``consistent`` False when the data contradict the
-    spec: the hull's set is proven empty)."""
+    spec: the hull's set is proven empty). progress : callable(stage, done, total) or None (the equation's windows,
+    the hull's rounds)."""
     from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
     from h4bench.ident.estimators.uncertain_signed import coarse_step, signed_uncertain_hull
     from h4bench.ident.processing.motion_check import check_motion_bounds
     from h4bench.ident.robots.serial_certified import certified_equation, certified_family
 
     t0 = time.perf_counter()
+
+    def stage(name):  # progress(done, total) of one stage, or None
+        return None if progress is None else (lambda done, total: progress(name, done, total))
     robot, base, prior_info = urdf_robot_and_prior(urdf, mass, reach, friction=friction, rotor_inertia=rotor_inertia,
                                                    offset=offset, coupled_wrist=coupled_wrist)
     nj = robot.n_joints
@@ -125,10 +130,11 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     try:
         if kernel["kernel_steps"] is None:
             eq = certified_family(robot, base, q, tau, spec, stride=kernel["stride"],
-                                  kernel_shape=kernel["kernel_shape"])
+                                  kernel_shape=kernel["kernel_shape"], progress=stage("certified equation"))
         else:
             eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
-                                    stride=kernel["stride"], kernel_shape=kernel["kernel_shape"])
+                                    stride=kernel["stride"], kernel_shape=kernel["kernel_shape"],
+                                    progress=stage("certified equation"))
     except ValueError as exc:
         raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None
     if len(eq) <= len(base):
@@ -143,7 +149,7 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
         windows = len(np.unique(eq.window, axis=0))
         box = signed_uncertain_hull(eq.Wc, eq.D, eq.y, eq.bound, prior, refine=int(kernel["refine"]),
                                     rtol=REFINE_RTOL, coarse=coarse_step(windows), groups=eq.window,
-                                    processes=hull_processes())
+                                    processes=hull_processes(), progress=stage("certified hull: rounds (at most)"))
     except ident.InconsistentDataError as exc:
         box = None
         scale = getattr(exc, "scale_lower", None)

@@ -35,7 +35,7 @@ def coarse_step(n_groups: int) -> int:
 
 
 def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: float = 0.0, coarse: int = 1,
-                          coarse_rtol: float = 0.1, groups=None, processes: int | None = None):
+                          coarse_rtol: float = 0.1, groups=None, processes: int | None = None, progress=None):
     """Oettli-Prager hull (:func:`ident.estimators.uncertain.uncertain_hull`) for a prior of any signs.
 
     The exact set ``{theta in Q : |y - Wc theta| <= bound + D |theta|}`` is not convex when a parameter's
@@ -65,17 +65,18 @@ def signed_uncertain_hull(Wc, D, y, bound, prior, *, refine: int = 1, rtol: floa
     ``info['coarse_rounds']`` counts the rounds on fewer rows.
 
     processes : None, every round's 2p LPs on one HiGHS model; 1 or 2, as two halves (the minima and the maxima,
-    :mod:`ident.estimators.hull_split`), in two processes with 2: the same box with 1 or 2.
+    :mod:`ident.estimators.hull_split`), in two processes with 2: the same box with 1 or 2. progress :
+    callable(rounds done, most rounds) after each round, or None.
     """
     if processes is None:
-        return _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, None)
+        return _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, None, progress)
     from h4bench.ident.estimators.hull_split import HullSplit
 
     with HullSplit(int(processes)) as split:
-        return _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, split)
+        return _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, split, progress)
 
 
-def _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, split):
+def _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, groups, split, progress):
     Wc, D = np.asarray(Wc, dtype=float), np.asarray(D, dtype=float)
     lo, hi = np.asarray(prior.lower, dtype=float), np.asarray(prior.upper, dtype=float)
     names = prior.names
@@ -138,6 +139,8 @@ def _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, grou
         pos = (w_old > 0) & (w_new > 0)
         shrink = 1.0 - float(np.exp(np.mean(np.log(w_new[pos] / w_old[pos])))) if np.any(pos) else 0.0
         lo, hi = new_lo, new_hi
+        if progress is not None:
+            progress(it + 1, int(refine) + 1)
         if step > 1:
             if shrink < coarse_rtol:  # twice the groups from the next round
                 step //= 2

@@ -71,6 +71,22 @@ def test_identify_spec_encloses_the_truth(synthetic_csv):
         assert f"dominated by the {diag['dominant']} term" in diag["message"] and "What would help" in diag["message"]
 
 
+def test_identify_spec_reports_its_progress(synthetic_csv):
+    """The equation's windows and the hull's rounds reach the progress callable (the command line's bar)."""
+    from h4bench.scenarios.identify_serial_certified import identify_urdf_spec
+
+    csv, toml, theta, d = synthetic_csv
+    seen = []
+    r = identify_urdf_spec(csv, URDF, toml, coupled_wrist=(4, 5), out=d / "progress",
+                           progress=lambda stage, done, total: seen.append((stage, done, total)))
+    assert r["methods"]["certified"]["status"] == "ok"
+    eq = [(dn, t) for s, dn, t in seen if s == "certified equation"]
+    hull = [(dn, t) for s, dn, t in seen if s.startswith("certified hull")]
+    assert eq and eq[-1][0] == eq[-1][1] and all(0 < dn <= t for dn, t in eq)
+    assert [dn for dn, _ in hull] == list(range(1, len(hull) + 1))
+    assert len(hull) == r["methods"]["certified"]["info"]["refinements"] + 1 and hull[0][1] == 2  # refine = 1
+
+
 @pytest.mark.parametrize("extra, spec_text, word", [
     (["--bound", "1"], None, "--bound does not apply with --spec"),
     (["--method", "cgsp"], None, "--method does not apply"),
