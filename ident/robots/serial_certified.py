@@ -50,9 +50,9 @@ local second derivatives), is bounded locally instead: the step's forward-differ
 Hessian, the global bounds left only on the third order and on the speed's deviation
 (:func:`ident.robots.serial_steps.q_remainder`). Taylor's remainders carry their factor 1/2. Columns of link i
 vanish on the rows of joints after i (structural zeros keep radius 0). **Stated, not proven**: pinocchio's
-floating-point error (taken below ``1e-12`` of the magnitudes summed, in ``float``), and the spec's own assumptions (the motion
-bounds, the torque error, the inter-sample torque for sample timing without a ``torque_rate``: within
-``torque_error`` of the interpolation of the samples).
+floating-point error (taken below ``1e-12`` of the magnitudes summed, in ``float``), and the spec's own
+assumptions (the motion bounds, the torque error, the inter-sample torque for sample timing without a
+``torque_rate``: within ``torque_error`` of the interpolation of the samples).
 
 **Evaluation** (:mod:`ident.robots.serial_steps`): pinocchio at each step's own arguments, each step once; the
 regressor at a window's scaled speed and acceleration rebuilt from them (``Y`` is affine in the acceleration and
