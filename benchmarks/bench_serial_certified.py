@@ -38,13 +38,15 @@ arm     commit   identify --spec [s]  equation [s]  hull [s]  LP     width/prior
 ======  =======  ===================  ============  ========  =====  ===========  ================  ========
 UR5     3217b55  218                  46            171       1251   0.0737       1.64              58/58
 UR5     6fc8ab8  139                  39            99        1904   0.0438       1.13              58/58
+UR5     7025314  105                  38            66        2399   0.0438       1.13              58/58
 Panda   40b2d46  255                  53            201       1490   0.196        4.65              69/69
 Panda   6fc8ab8  247                  66            181       2532   0.0426       1.21              69/69
 ======  =======  ===================  ============  ========  =====  ===========  ================  ========
 
 (LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio,
 the tuned hull at the true torque bound 0.8 N m, 4.6 s for the UR5 and 6.5 s for the Panda. The UR5's first row
-is the earlier table's ``new`` run at 3217b55.) What changed: the q-q remainder of the Coriolis and gravity terms
+is the earlier table's ``new`` run at 3217b55; its row at 7025314 ran alone on the machine, with the hull's minima
+and maxima in two processes, :mod:`ident.estimators.hull_split`, its CPU time 99 s.) What changed: the q-q remainder of the Coriolis and gravity terms
 bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated exactly (1b54bd7), and
 the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069, 6fc8ab8). At 6fc8ab8
 the Panda's hull took 9 rounds (median width / prior after each: 0.711, 0.229, 0.110, 0.0619, 0.0533, 0.0470 on
