@@ -25,7 +25,13 @@ def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
     result = run_.result()
     result["index"] = index
     result["noise_shape"] = shape
-    if spec["certified"]["enabled"]:  # --error-model derived: the certified box and its certificate beside
+    _add_certified(result, run_, spec)
+    return result
+
+
+def _add_certified(result: dict, run_, spec: dict) -> None:
+    """With --error-model derived: the certified box and its certificate beside the run's boxes."""
+    if spec["certified"]["enabled"]:
         from h4bench.scenarios.certificate import certify
 
         started = time.perf_counter()
@@ -33,7 +39,6 @@ def campaign_job(spec: dict, index: int, base_seed: int) -> dict:
         result.setdefault("timings", {})["certified"] = time.perf_counter() - started
         result["methods"]["certified"] = extra.pop("certified_entry")
         result.update(extra)
-    return result
 
 
 def replay_one(spec: dict, index: int, base_seed: int, out: Path, progress) -> dict:
@@ -46,6 +51,7 @@ def replay_one(spec: dict, index: int, base_seed: int, out: Path, progress) -> d
     result = run_.result()
     result["index"] = index
     result["noise_shape"] = shape
+    _add_certified(result, run_, spec)  # the same run as the campaign's: its certified box too
     report.plot_boxes(result, out / "boxes.png")
     report.write_paper_report(result, out, extra=f"Run {index} of campaign `{spec['name']}` (noise {shape}).")
     return result

@@ -81,6 +81,12 @@ def test_enclosure_campaign_with_the_derived_error_model(tmp_path):
     assert cert["violations"] == 0 and cert["min_margin"] >= 0
     assert result["methods"]["certified"]["misses"] == 0
     assert result["campaign"]["timings"]["stages"]["certified"]["total"] > 0  # its own stage, not 'other'
+    # --only re-runs one index with its certified box: the campaign's own run, the same box and certificate
+    again = run_scenario("enclosure", quick=True, out=tmp_path / "enc", workers=2, error_model="derived", only=1)
+    saved = json.loads((tmp_path / "enc" / "runs" / "0001.json").read_text())
+    assert again["methods"]["certified"]["lower"] == saved["methods"]["certified"]["lower"]
+    assert again["methods"]["certified"]["upper"] == saved["methods"]["certified"]["upper"]
+    assert again["certificate"]["status"] == saved["certificate"]["status"]
 
 
 def test_derived_error_model_is_refused_where_it_is_not_built(tmp_path):
