@@ -124,9 +124,14 @@ def verdict_lines(result: dict) -> list[str]:
     return lines
 
 
-def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, tau_logged=None) -> ErrorSpec:
+def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, tau_logged=None,
+                         model=None) -> ErrorSpec:
     """The simulated robot's ErrorSpec: its sensor facts from the simulator's settings, its motion bounds stated
     from the reference (see the module docstring); ``sources`` says which is which.
+
+    model : the simulated ``mujoco.MjModel`` (default the shipped H4): its friction-loss rows give the
+    ``friction_band`` (:func:`sim.friction.friction_band`, with the stated ``qdd_max`` and the prior's upper
+    bound ``spec["prior"]["upper"]`` on Fs): MuJoCo's soft friction is Coulomb's only above it.
 
     tau_logged : (N, 4) the logged torques, or None. The simulator adds the injected error to the command in
     floating point, so ``|applied - logged|`` exceeds ``noise.bound`` by up to half an ulp of the applied torque
@@ -147,7 +152,16 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, t
         torque = float(np.nextafter(torque + ulp, np.inf))
     qd = float(em["qd_max"]) or em["motion_margin_qd"] * np.abs(np.asarray(reference.qd)).max(axis=0)
     qdd = float(em["qdd_max"]) or em["motion_margin_qdd"] * np.abs(np.asarray(reference.qdd)).max(axis=0)
+    from h4bench.sim.friction import friction_band  # noqa: PLC0415
+    from h4bench.sim.model import load_model  # noqa: PLC0415
+
+    fs_max = float(spec["prior"]["upper"])
+    band = friction_band(load_model() if model is None else model, qdd, fs_max)
     sources = {
+        "friction_band": (f"the simulator's friction law (MuJoCo's soft friction loss, sim.friction): Coulomb's "
+                          f"Fs sign(qd) wherever |qd| >= (qdd_max + R Fs) / b, with b and R of its friction rows "
+                          f"and Fs <= {fs_max:g} N m (the prior); checked against the truth in the certificate's "
+                          "motion and total checks"),
         "position_resolution": f"the simulator's encoder: {counts} counts per turn, rounded to the nearest count",
         "sample_period": "the simulator's sample period (torques held over each step)",
         "torque_error": ("stated in error_model.torque_error" if em["torque_error"] else
@@ -165,7 +179,7 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, t
     }
     return ErrorSpec(n_joints=4, sample_period=float(dt), position_resolution=2 * np.pi / counts,
                      position_rounding="nearest", torque_timing="hold", torque_error=torque, qd_max=qd, qdd_max=qdd,
-                     model_error=float(em["model_error"]), sources=sources)
+                     model_error=float(em["model_error"]), friction_band=band, sources=sources)
 
 
 def processing_of(spec: dict) -> Processing:
@@ -182,7 +196,8 @@ def certify(run_, spec: dict) -> dict:
     """The certified box of an experiment run, judged, with its certificate; adds ``certified`` to the run's
     boxes and returns the extra result keys (``certificate``, ``error_model``, ``width_vs_tuned_geomean``,
     ``methods.certified``)."""
-    error_spec = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound, run_.dataset.tau)
+    error_spec = simulated_error_spec(spec, run_.reference, run_.dataset.dt, run_.noise_bound, run_.dataset.tau,
+                                      model=run_.model)
     processing = processing_of(spec)
     t0 = time.perf_counter()
     ceq = certified_equation(run_.geometry, run_.dataset.q, run_.dataset.tau, error_spec, processing)

@@ -115,7 +115,9 @@ def run_error_spec(run_dir):
     if not isinstance(noise.get("bound"), (int, float)):
         raise ExportError(f"RUN_DIR {str(run_dir)!r}: result.json has no noise.bound (the injected torque error's "
                           "bound): not a simulated run")
-    spec = {"error_model": dict(defaults["error_model"]),
+    from h4bench.scenarios.spec import DEFAULTS
+
+    spec = {"error_model": dict(defaults["error_model"]), "prior": dict(DEFAULTS["prior"]),
             "encoder": {"counts_per_turn": dataset.metadata.get("encoder_counts") or 0}}
     return simulated_error_spec(spec, reference, dataset.dt, float(noise["bound"]), dataset.tau), certified
 

@@ -27,6 +27,12 @@ entry                       unit      meaning
 ``qd_max``, ``qdd_max``     rad/s,    (n,) stated bounds of the TRUE motion's speed and acceleration
                             rad/s^2   (there is no bound on the jerk: a held-torque step makes qdd jump)
 ``model_error``             N m       (n,) bound on what the regressor's structure leaves out
+``friction_band``           rad/s     (n,) speed below which the friction is only known to lie in
+                                      ``[-Fs, Fs]`` (0, the default: ideal Coulomb friction, exactly
+                                      ``Fs sign(qd)`` at every non-zero speed); a step whose speed may be
+                                      below it gets the Coulomb column's sign interval, like a step
+                                      through rest (pre-sliding, stiction, a simulator's soft friction:
+                                      :mod:`sim.friction`)
 ==========================  ========  ==================================================================
 
 ``sources`` says where each entry comes from (a data sheet, the file format, the simulator's settings, an
@@ -52,11 +58,13 @@ from h4bench.ident.validation import per_joint, positive
 
 __all__ = ["ErrorSpec", "ErrorSpecError"]
 
-_PER_JOINT = ("position_resolution", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error")
+_PER_JOINT = ("position_resolution", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error",
+              "friction_band")
 _ROUNDING = ("nearest", "floor")
 _TIMING = ("hold", "sample")
 _KEYS = {"sample_period", "position_resolution", "counts_per_turn", "significant_digits", "position_rounding",
-         "torque_timing", "latency", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error", "sources"}
+         "torque_timing", "latency", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error",
+         "friction_band", "sources"}
 
 
 class ErrorSpecError(ValueError):
@@ -96,6 +104,7 @@ class ErrorSpec:
     latency: float = 0.0
     torque_rate: np.ndarray | None = None
     model_error: np.ndarray | float = 0.0
+    friction_band: np.ndarray | float = 0.0
     sources: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -119,9 +128,9 @@ class ErrorSpec:
             raise ErrorSpecError(f"position_rounding must be one of {_ROUNDING}, got {self.position_rounding!r}")
         if self.torque_timing not in _TIMING:
             raise ErrorSpecError(f"torque_timing must be one of {_TIMING}, got {self.torque_timing!r}")
-        for name in ("torque_error", "qd_max", "qdd_max", "model_error"):
-            set_(self, name, _per_joint(getattr(self, name), name, n, allow_zero=name in ("torque_error",
-                                                                                           "model_error")))
+        for name in ("torque_error", "qd_max", "qdd_max", "model_error", "friction_band"):
+            set_(self, name, _per_joint(getattr(self, name), name, n,
+                                        allow_zero=name in ("torque_error", "model_error", "friction_band")))
         if self.torque_rate is not None:
             set_(self, "torque_rate", _per_joint(self.torque_rate, "torque_rate", n))
         elif self.latency > 0:
@@ -169,7 +178,7 @@ class ErrorSpec:
             "position_rounding": self.position_rounding, "torque_timing": self.torque_timing,
             "latency": self.latency, "torque_rate": arr(self.torque_rate), "torque_error": arr(self.torque_error),
             "qd_max": arr(self.qd_max), "qdd_max": arr(self.qdd_max), "model_error": arr(self.model_error),
-            "sources": dict(self.sources),
+            "friction_band": arr(self.friction_band), "sources": dict(self.sources),
         }
 
     @classmethod

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from h4bench.ident.numerics.interval import dot_error, up
+from h4bench.ident.numerics.interval import dot_error, down, up
 
 __all__ = ["KERNEL_SHAPES", "Kernel", "NonlinearSteps", "RowWindows", "coulomb_columns", "make_kernel",
            "nonlinear_columns", "nonlinear_rows", "nonlinear_steps",
@@ -189,15 +189,18 @@ def viscous_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max):
     return value, meas, up(np.array(trunc))
 
 
-def coulomb_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max):
-    """The ``F = sign(qd_i)`` column: on a step where the true speed's bound ``|v| - (e_j + e_j+1) / h -
-    qdd_max h / 2 > 0`` excludes 0 the sign is certain (``sign(v)``); elsewhere it is any value in [-1, 1] (the
-    friction of a joint at or through rest), weighted by ``K_w``. Returns (value, radius, uncertain_steps) with
-    value, radius (R, n_j) [-] and uncertain_steps (S, n_j) bool."""
+def coulomb_columns(q, e, windows: RowWindows, kernel: Kernel, qdd_max, band=0.0):
+    """The ``F = sign(qd_i)`` column: on a step where the true speed's lower bound ``|v| - (e_j + e_j+1) / h -
+    qdd_max h / 2`` exceeds ``band`` (the speed below which the friction is only known to lie in ``[-Fs, Fs]``,
+    ``ErrorSpec.friction_band``; 0: ideal Coulomb friction, where excluding 0 suffices) the friction is
+    ``Fs sign(v)``; elsewhere ``F`` is any value in [-1, 1] (the friction of a joint at, through or near rest),
+    weighted by ``K_w``. Returns (value, radius, uncertain_steps) with value, radius (R, n_j) [-] and
+    uncertain_steps (S, n_j) bool."""
     h = kernel.h
     v = np.diff(q, axis=0) / h
-    margin = (e[:-1] + e[1:]) / h + 0.5 * np.asarray(qdd_max, dtype=float) * h
-    certain = np.abs(v) > up(margin)
+    encoder, motion = up(up(e[:-1] + e[1:]) / h), up(0.5 * np.asarray(qdd_max, dtype=float) * h)
+    margin = up(up(encoder + motion) + np.asarray(band, dtype=float))
+    certain = down(down(np.abs(v))) > margin  # v = fl(fl(q_j+1 - q_j) / h): two roundings
     sign = np.where(certain, np.sign(v), 0.0)
     K = kernel.integrals
     value = np.einsum("w,rwj->rj", K, windows.gather(sign))

@@ -347,7 +347,8 @@ def _regressor_columns(steps: CertifiedSteps, kernel, windows):
                                                           "sign")}
     joint = np.arange(N_JOINTS)
     for offset, fn in ((0, imot_columns), (6, viscous_columns), (10, coulomb_columns)):
-        args = (q, e, windows, kernel) + (() if fn is imot_columns else (spec.qdd_max,))
+        args = (q, e, windows, kernel) + (() if fn is imot_columns else (spec.qdd_max,)) + (
+            (spec.friction_band,) if fn is coulomb_columns else ())
         value, r1, r2 = fn(*args)
         cols["value"][:, joint, offset + joint] = value
         if fn is coulomb_columns:

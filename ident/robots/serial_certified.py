@@ -267,12 +267,14 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     windows = RowWindows(start=starts, steps=L)
     Fqdd, r_qdd_pos, _ = imot_columns(q, e, windows, kern)
     Fqd, r_qd_pos, r_qd_mot = viscous_columns(q, e, windows, kern, qddm)
-    Fsign, r_sign, _ = coulomb_columns(q, e, windows, kern, qddm)
+    Fsign, r_sign, _ = coulomb_columns(q, e, windows, kern, qddm, spec.friction_band)
     if robot.coupled_wrist is not None:  # sign(qd_a + qd_b) of the wrist motor, the same per-step rule
         a, b = robot.coupled_wrist
         v1 = np.diff(q, axis=0) / dt
         vm = v1[:, a] + v1[:, b]
-        margin = up((e[:-1, a] + e[1:, a] + e[:-1, b] + e[1:, b]) / dt + 0.5 * (qddm[a] + qddm[b]) * dt)
+        # the motor's friction band: the two joints' bands summed (the motor turns at qd_a + qd_b)
+        margin = up(up((e[:-1, a] + e[1:, a] + e[:-1, b] + e[1:, b]) / dt + 0.5 * (qddm[a] + qddm[b]) * dt)
+                    + up(spec.friction_band[a] + spec.friction_band[b]))
         cm = np.abs(vm) > margin
         Fsign_m = windows.gather(np.where(cm, np.sign(vm), 0.0)) @ K1
         r_sign_m = up(windows.gather((~cm).astype(float)) @ K1 + gamma_l)

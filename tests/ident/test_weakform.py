@@ -183,3 +183,30 @@ def test_coulomb_steps_of_sample_instant_torques_lie_in_the_coulomb_column():
     # the interpolation misses the step: as a rate term it would need |d tau/dt| >= 2 worst / h (> 68 N m/s here,
     # for a torque that is constant apart from the steps)
     assert worst > 0.04 * fs
+
+
+def test_friction_band_covers_a_friction_law_that_is_coulomb_only_above_it():
+    """A friction law that is Coulomb's ``fs sign(qd)`` only at ``|qd| >= band`` (here ``fs clip(qd / band, -1,
+    1)``, a linear pre-sliding zone): with ``band`` stated, every row's Coulomb column holds its exact integral
+    (oracle: scipy quadrature on the true motion); with the band left at 0 some rows do not."""
+    n, L, fs, band = 600, 40, 1.7, np.array([0.25, 0.15])
+    k = make_kernel(L, H, "hann")
+    win = row_windows(n, L, 7)
+    t = H * np.arange(n)
+    w = 2 * np.pi * 2.3
+    q = np.stack([0.2 * np.sin(w * t + 0.3), 0.1 * np.cos(w * t)], axis=1)
+    qd = lambda s: np.stack([0.2 * w * np.cos(w * s + 0.3), -0.1 * w * np.sin(w * s)], axis=-1)  # noqa: E731
+    e = np.full_like(q, 1e-7)
+    qdd_max = np.array([0.2 * w**2, 0.1 * w**2])
+    missed = {}
+    for stated in (band, np.zeros(2)):
+        value, radius, uncertain = coulomb_columns(q, e, win, k, qdd_max, stated)
+        worst = 0.0
+        for r in range(win.start.size):
+            t0 = H * win.start[r]
+            for j in range(2):
+                exact = quad(lambda s: k_of(k, t0)(s) * fs * np.clip(qd(s)[j] / band[j], -1, 1), t0, t0 + L * H,
+                             limit=400, points=t0 + H * np.arange(L + 1))[0]
+                worst = max(worst, abs(exact - fs * value[r, j]) - fs * radius[r, j])
+        missed[bool(stated.any())] = worst
+    assert missed[True] <= 1e-9 and missed[False] > 1e-3
