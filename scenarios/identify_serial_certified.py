@@ -8,7 +8,8 @@ the Oettli-Prager hull in the physical prior (as ``--urdf`` documents), the stat
 against the data, and the term that dominates the radii. An optional ``[certified]`` table (the H4's keys where
 they apply) sets the kernel: ``kernel_steps`` (even; default none: every kernel of
 the serial family, :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle``,
-the default, or ``hann``), ``stride`` [samples] (default 0.02 s) and ``refine`` (default :data:`REFINE`: at most that
+the default, or ``hann``), ``stride`` [samples] (default: a kernel of L steps takes a row every ``L // 4``
+samples, :data:`ident.robots.serial_certified.SERIAL_OVERLAP`) and ``refine`` (default :data:`REFINE`: at most that
 many rounds of the hull with the last box as prior, until the widths' geometric mean shrinks by less than
 :data:`REFINE_RTOL`; the first rounds on every ``coarse_step``-th window only:
 :func:`ident.estimators.uncertain_signed.signed_uncertain_hull`).
@@ -32,7 +33,6 @@ from h4bench.scenarios.threads import hull_processes
 
 __all__ = ["REFINE", "REFINE_RTOL", "identify_urdf_spec", "read_kernel"]
 
-STRIDE_SECONDS = 0.02  # default row spacing [s]
 REFINE_RTOL = 0.02  # stop refining when the widths' geometric mean shrank by less than this in a round
 # at most this many rounds of the hull with the last box as prior: the box keeps shrinking for many rounds (each
 # round's chords of |theta| over a smaller box), so REFINE_RTOL, not this cap, ends them (per-round widths and
@@ -41,11 +41,12 @@ REFINE = 16
 _KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "refine": int}
 
 
-def read_kernel(spec_path, dt: float) -> dict:
+def read_kernel(spec_path) -> dict:
     """The optional ``[certified]`` table of the spec file for a serial robot: ``kernel_steps`` (even, >=
     :data:`ident.processing.choice.MIN_KERNEL_STEPS`; default None: the rows of every kernel of the serial family,
     :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle`` or ``hann``),
-    ``stride`` [samples] (default 0.02 s), ``refine`` (default :data:`REFINE`); the H4's ``curvature_every`` does
+    ``stride`` [samples] (default None: each kernel's ``L //`` :data:`ident.robots.serial_certified.SERIAL_OVERLAP`),
+    ``refine`` (default :data:`REFINE`); the H4's ``curvature_every`` does
     not apply. Errors name ``--spec`` and the file."""
     path = Path(spec_path)
     try:
@@ -55,10 +56,9 @@ def read_kernel(spec_path, dt: float) -> dict:
     if not isinstance(table, dict) or set(table) - set(_KEYS):
         raise OptionError(f"--spec {path} [certified]: with --urdf expected some of {sorted(_KEYS)}, got "
                           f"{sorted(table) if isinstance(table, dict) else table!r}")
-    out = {"kernel_steps": None, "kernel_shape": "triangle", "stride": max(1, int(round(STRIDE_SECONDS / dt))),
-           "refine": REFINE, **table}
+    out = {"kernel_steps": None, "kernel_shape": "triangle", "stride": None, "refine": REFINE, **table}
     for k, kind in _KEYS.items():
-        if not (k == "kernel_steps" and out[k] is None) and (isinstance(out[k], bool) or not isinstance(out[k], kind)):
+        if not (k in ("kernel_steps", "stride") and out[k] is None) and (isinstance(out[k], bool) or not isinstance(out[k], kind)):
             raise OptionError(f"--spec {path} [certified].{k} must be {kind.__name__}, got {out[k]!r}")
     if out["kernel_steps"] is not None:
         try:
@@ -71,7 +71,7 @@ def read_kernel(spec_path, dt: float) -> dict:
     if out["kernel_shape"] not in ("triangle", "hann"):
         raise OptionError(f"--spec {path} [certified].kernel_shape must be triangle or hann, got "
                           f"{out['kernel_shape']!r}")
-    if out["stride"] < 1:
+    if out["stride"] is not None and out["stride"] < 1:
         raise OptionError(f"--spec {path} [certified].stride must be an integer >= 1 [samples], got {out['stride']!r}")
     if out["refine"] < 0:
         raise OptionError(f"--spec {path} [certified].refine must be an integer >= 0, got {out['refine']!r}")
@@ -89,7 +89,7 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
     from h4bench.ident.estimators.uncertain_signed import coarse_step, signed_uncertain_hull
     from h4bench.ident.processing.motion_check import check_motion_bounds
-    from h4bench.ident.robots.serial_certified import certified_equation, certified_family
+    from h4bench.ident.robots.serial_certified import SERIAL_OVERLAP, certified_equation, certified_family
 
     t0 = time.perf_counter()
 
@@ -106,7 +106,7 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     except ErrorSpecError as exc:
         msg = str(exc)
         raise OptionError(msg if msg.startswith("--spec") else f"--spec {spec_path}: {msg}") from None
-    kernel = read_kernel(spec_path, spec.sample_period)
+    kernel = read_kernel(spec_path)
     out = check_target(Path(out) if out is not None else RUNS_DIR / f"identify-{Path(path).stem}")
     q, tau, dt = read_serial_log(path, nj)
     if abs(dt - spec.sample_period) > 1e-3 * spec.sample_period:
@@ -133,7 +133,8 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
                                   kernel_shape=kernel["kernel_shape"], progress=stage("certified equation"))
         else:
             eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
-                                    stride=kernel["stride"], kernel_shape=kernel["kernel_shape"],
+                                    stride=kernel["stride"] or max(1, kernel["kernel_steps"] // SERIAL_OVERLAP),
+                                    kernel_shape=kernel["kernel_shape"],
                                     progress=stage("certified equation"))
     except ValueError as exc:
         raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None

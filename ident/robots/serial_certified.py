@@ -87,7 +87,7 @@ from h4bench.ident.processing.choice import kernel_family, stack_equations
 from h4bench.ident.robots.serial_steps import PARTS, inertial_rows
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
-__all__ = ["SERIAL_FAMILY", "CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "certified_family",
+__all__ = ["SERIAL_FAMILY", "SERIAL_OVERLAP", "CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "certified_family",
            "check_motion_bounds", "geometry_bounds", "secant_span"]
 
 RADII_GROW = 1.0 + 2.0**-40  # outward margin on the inertial radii's float sums (>= (1 + u)^4000)
@@ -176,15 +176,22 @@ class CertifiedEquation:
 #: 1af7ca8): width over the tuned hull's, median over the 58 base parameters, 5.75 at 0.08 s, 1.76 at 0.2 s, 1.80 at
 #: 0.4 s. Each kernel costs one pass of the per-step bounds, so the family is kept to two.
 SERIAL_FAMILY = {"shortest_s": 0.2, "longest_s": 0.4, "factor": 2.0}
+#: without a stated stride, a serial kernel of L steps takes a row every L // SERIAL_OVERLAP samples (every sample in
+#: SERIAL_OVERLAP windows of each kernel). Denser rows say nearly the same: on the UR5 and Panda logs of
+#: benchmarks/bench_serial_certified.py the rows 4x denser (every L // 16) narrowed the median width by 5 % and 10 %
+#: for 2-4x the time (the hull's rounds on the denser rows at 6fc8ab8).
+SERIAL_OVERLAP = 4
 
 
-def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int, progress=None,
+def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None = None, progress=None,
                      **kwargs) -> CertifiedEquation:
     """The rows of every kernel of the serial family (:data:`SERIAL_FAMILY`, even lengths), stacked: one true
     interval equation (each kernel's is), whose hull lies in each kernel's. stride : the shortest kernel's row
-    spacing [steps]; other keywords as :func:`certified_equation`. ``info["kernels"]`` names the family."""
+    spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: every kernel's ``L //``
+    :data:`SERIAL_OVERLAP`; other keywords as :func:`certified_equation`. ``info["kernels"]`` names the family."""
     t0 = time.perf_counter()
-    fam = kernel_family(np.asarray(q).shape[0], spec.sample_period, int(stride), even=True, **SERIAL_FAMILY)
+    fam = kernel_family(np.asarray(q).shape[0], spec.sample_period, 1 if stride is None else int(stride), even=True,
+                        **SERIAL_FAMILY, **({"stride_divisor": SERIAL_OVERLAP} if stride is None else {}))
     k = len(fam.steps)
     eqs = []
     for i, (L, st) in enumerate(zip(fam.steps, fam.strides)):
