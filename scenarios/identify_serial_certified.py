@@ -130,7 +130,8 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     try:
         if kernel["kernel_steps"] is None:
             eq = certified_family(robot, base, q, tau, spec, stride=kernel["stride"],
-                                  kernel_shape=kernel["kernel_shape"], progress=stage("certified equation"))
+                                  kernel_shape=kernel["kernel_shape"], progress=stage("certified equation"),
+                                  processes=hull_processes())
         else:
             eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
                                     stride=kernel["stride"] or max(1, kernel["kernel_steps"] // SERIAL_OVERLAP),

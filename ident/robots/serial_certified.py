@@ -183,21 +183,45 @@ SERIAL_FAMILY = {"shortest_s": 0.2, "longest_s": 0.4, "factor": 2.0}
 SERIAL_OVERLAP = 4
 
 
+def _kernel_rows(args):
+    robot, base, q, tau, spec, L, st, kwargs = args
+    return certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st, **kwargs)
+
+
 def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None = None, progress=None,
-                     **kwargs) -> CertifiedEquation:
+                     processes: int = 1, **kwargs) -> CertifiedEquation:
     """The rows of every kernel of the serial family (:data:`SERIAL_FAMILY`, even lengths), stacked: one true
     interval equation (each kernel's is), whose hull lies in each kernel's. stride : the shortest kernel's row
     spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: every kernel's ``L //``
-    :data:`SERIAL_OVERLAP`; other keywords as :func:`certified_equation`. ``info["kernels"]`` names the family."""
+    :data:`SERIAL_OVERLAP`; processes : 2 computes the longest kernel's rows in a worker process (``forkserver``)
+    beside the others (each kernel's rows are the same bits either way); other keywords as
+    :func:`certified_equation`. ``info["kernels"]`` names the family."""
+    import concurrent.futures  # noqa: PLC0415
+    import multiprocessing  # noqa: PLC0415
+
+    if processes not in (1, 2):
+        raise ValueError(f"processes must be 1 or 2, got {processes!r}")
     t0 = time.perf_counter()
     fam = kernel_family(np.asarray(q).shape[0], spec.sample_period, 1 if stride is None else int(stride), even=True,
                         **SERIAL_FAMILY, **({"stride_divisor": SERIAL_OVERLAP} if stride is None else {}))
     k = len(fam.steps)
+    pairs = list(zip(fam.steps, fam.strides))
+    later = pool = None
+    if processes == 2 and k > 1:  # the last (longest) kernel in the worker
+        pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
+        later = pool.submit(_kernel_rows, (robot, base, q, tau, spec, *pairs[-1], kwargs))
+        pairs = pairs[:-1]
     eqs = []
-    for i, (L, st) in enumerate(zip(fam.steps, fam.strides)):
-        step = None if progress is None else (lambda d, t, i=i: progress(i * t + d, k * t))
-        eqs.append(certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st, progress=step,
-                                      **kwargs))
+    try:
+        for i, (L, st) in enumerate(pairs):
+            step = None if progress is None else (lambda d, t, i=i: progress(i * t + d, k * t))
+            eqs.append(certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st, progress=step,
+                                          **kwargs))
+        if later is not None:
+            eqs.append(later.result())
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
     if k == 1:
         eqs[0].info["kernels"] = fam.to_dict()
         return eqs[0]

@@ -230,6 +230,13 @@ def test_family_stacks_each_kernels_rows(robot, base, monkeypatch):
     assert fam.steps == (40, 64)
     eq = sc.certified_family(robot, base, q, tau, spec, stride=10)
     assert eq.info["kernels"]["steps"] == [40, 64]
+    # the longest kernel's rows in a worker process: the same bits
+    two = sc.certified_family(robot, base, q, tau, spec, stride=10, processes=2)
+    for name in ("Wc", "D", "y", "bound", "joint", "window"):
+        np.testing.assert_array_equal(getattr(two, name), getattr(eq, name))
+    # no stated stride: every kernel's L // SERIAL_OVERLAP
+    wide = sc.certified_family(robot, base, q, tau, spec)
+    assert wide.info["kernels"]["strides"] == [L // sc.SERIAL_OVERLAP for L in (40, 64)]
     at = 0
     for L, st in zip(fam.steps, fam.strides):
         one = sc.certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st)
