@@ -7,7 +7,7 @@ but ignores the correlations of S, so it is much wider. Each LP (one HiGHS model
 :class:`ident.estimators.support.SupportLP`, warm-started from the previous optimum, rows scaled by their bound,
 columns to unit root-mean-square, violated rows added until none is left) only steers: the endpoint returned
 is the Neumaier-Shcherbina safe bound (Neumaier & Shcherbina, Math. Program. 99, 2004;
-:class:`ident.numerics.lp.SafeBound`) of the working-set LP with its row duals, on the original data: rigorous
+:class:`ident.numerics.safe_bound.SafeBound`) of the working-set LP with its row duals, on the original data: rigorous
 for any duals, and a bound of the full LP too (fewer rows, a larger set); an LP that HiGHS does not solve keeps
 the box's bound. Each endpoint is also intersected with
 the interval evaluation over Q (both are outer bounds). Nothing here depends on the robot.

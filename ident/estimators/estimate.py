@@ -31,7 +31,8 @@ from h4bench.ident.estimators import registry
 from h4bench.ident.estimators.cgsp import cgsp
 from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y
 from h4bench.ident.estimators.enclosure import Verdict, decide_and_enclose
-from h4bench.ident.estimators.hull import chebyshev, hull_report, interval_hull, scaled_residual_upper, strip_bounds
+from h4bench.ident.estimators.chebyshev import chebyshev, scaled_residual_upper
+from h4bench.ident.estimators.hull import hull_report, interval_hull, strip_bounds
 
 __all__ = [
     "METHODS",
@@ -127,13 +128,13 @@ def min_consistent_bound(W, y, prior) -> float:
 
 def min_consistent_scale(W, y, weights, prior) -> float:
     """Rigorous upper bound of the smallest scale ``s*`` with ``|y - W theta| <= s* weights`` row by row for some
-    theta in the prior box (the weighted Chebyshev fit, :func:`ident.estimators.hull.chebyshev`).
+    theta in the prior box (the weighted Chebyshev fit, :func:`ident.estimators.chebyshev.chebyshev`).
 
     W : (m, p); y : (m,); weights : (m,) > 0 (e.g. a per-joint bound shape, [N m]); prior : Box or (lower, upper).
     ``bound = min_consistent_scale(...) * weights`` is guaranteed consistent; it exceeds ``s*`` only by the LP
     tolerance. Raises :class:`~ident.numerics.lp.LPError` when HiGHS cannot solve the LP.
     """
-    from h4bench.ident.estimators.hull import chebyshev
+    from h4bench.ident.estimators.chebyshev import chebyshev
 
     Wc, yc = check_W_y(W, y)
     check_prior(prior, Wc.shape[1])

@@ -23,7 +23,7 @@ was optimal for that objective; the working sets are a few hundred rows, so memo
 
 When a model becomes infeasible, or the safe bounds of two endpoints cross (``lower_i > upper_i``, itself a
 proof that the rows seen are inconsistent), the verdict is the batch estimator's: a Chebyshev LP over all rows
-seen decides (:func:`ident.estimators.hull.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
+seen decides (:func:`ident.estimators.chebyshev.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
 is raised and **the rejected block is dropped**: the object is left exactly as before the update (rows seen,
 box, working sets; the HiGHS models that had taken rows of the block are rebuilt from their working sets), so
 later consistent blocks can still be added. If it is not proven (the set is thinner than the LP tolerance),
@@ -50,7 +50,8 @@ from h4bench.ident.errors import InconsistentDataError
 from h4bench.ident.estimators.checks import check_finite, check_prior, real_array
 from h4bench.ident.estimators.estimate import estimate
 from h4bench.ident.estimators.hull import strip_bounds
-from h4bench.ident.numerics.lp import LPError, LPModel, column_scale, power2_scale, shifted_safe_bound
+from h4bench.ident.numerics.lp import LPError, LPModel, column_scale, power2_scale
+from h4bench.ident.numerics.safe_bound import shifted_safe_bound
 from h4bench.ident.box import Box
 
 __all__ = ["OnlineHull"]

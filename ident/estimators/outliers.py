@@ -69,8 +69,8 @@ from h4bench.ident.estimators.checks import check_bound, check_prior, check_W_y
 from h4bench.ident.estimators.estimate import estimate, min_consistent_bound
 from h4bench.ident.estimators.hull import strip_bounds
 from h4bench.ident.numerics.interval import point_matvec, up
-from h4bench.ident.numerics.lp import (LPError, LPModel, arm_time_limit, check, column_scale, power2_scale,
-                                       safe_lower_bound)
+from h4bench.ident.numerics.lp import LPError, LPModel, arm_time_limit, check, column_scale, power2_scale
+from h4bench.ident.numerics.safe_bound import safe_lower_bound
 
 __all__ = ["OutlierBudgetError", "OutlierRows", "detect_outliers", "relaxed_hull"]
 

@@ -2,7 +2,7 @@
 
 The feasible set is ``S = {theta in [lo, hi] : |y_k - W_k theta| <= b_k for every row k}``. A float point x is
 *proven* in S when it lies in the prior and the rigorous (outward-rounded) upper bound of ``max_k |y_k - W_k x| /
-b_k`` is at most 1 (:func:`~ident.estimators.hull.scaled_residual_upper`). :func:`proven_points` proves candidate
+b_k`` is at most 1 (:func:`~ident.estimators.chebyshev.scaled_residual_upper`). :func:`proven_points` proves candidate
 points (e.g. the exact hull's LP solutions, ``Box.info["points"]`` of ``ident.estimate(..., method="hull")``): a
 candidate that fails is pulled towards a proven point of S c (the candidates' mean, else the Chebyshev centre)
 along the segment, ``x_t = c + t (x - c)`` for ``t = 1 - 10^-k``, k = 12, 9, 6, 3, 2, 1, until it passes (S is
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident.estimators.hull import chebyshev, scaled_residual_upper
+from h4bench.ident.estimators.chebyshev import chebyshev, scaled_residual_upper
 
 __all__ = ["PULLS", "excluded_point", "proven_points"]
 

@@ -10,7 +10,7 @@ that contains it (the prior, or a hull of S). :class:`SupportLP` answers ``min c
   violated rows are added and the LP re-solved, until no row is off its strip by more than
   ``violation_tol * b_k``. The LPs stay a few hundred rows however large N is;
 * **safe bounds**: the returned value is the Neumaier-Shcherbina bound (Neumaier & Shcherbina, Math.
-  Program. 99, 2004; :class:`ident.numerics.lp.SafeBound`) of the working-set LP, with its row duals, evaluated
+  Program. 99, 2004; :class:`ident.numerics.safe_bound.SafeBound`) of the working-set LP, with its row duals, evaluated
   on the original data around the centre and over ``B``. A working set has fewer rows than S, so its LP's
   minimum is at most the minimum over S: the bound is rigorous whatever the tolerances and however many rows
   are still missing; the tolerances only decide its tightness. An LP HiGHS cannot solve, or that stops at its
@@ -29,7 +29,8 @@ import numpy as np
 
 from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, strip_bounds
 from h4bench.ident.numerics.interval import mul, sum_down
-from h4bench.ident.numerics.lp import LPError, LPModel, SafeBound, column_scale, power2_scale
+from h4bench.ident.numerics.lp import LPError, LPModel, column_scale, power2_scale
+from h4bench.ident.numerics.safe_bound import SafeBound
 
 __all__ = ["SupportLP"]
 

@@ -41,7 +41,8 @@ from h4bench.ident.estimators.estimate import least_squares_center
 from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, HullWarm, hull_report, interval_hull, strip_bounds
 from h4bench.ident.numerics.interval import down, point_matmul, point_matvec, up
 from h4bench.portable import matmul as pmatmul
-from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale, shifted_safe_bound
+from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale
+from h4bench.ident.numerics.safe_bound import shifted_safe_bound
 
 __all__ = ["uncertain_hull", "uncertain_hull_rows"]
 

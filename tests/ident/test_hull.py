@@ -16,7 +16,8 @@ from flint import fmpq, fmpq_mat
 from scipy.optimize import linprog
 
 from h4bench import ident
-from h4bench.ident.estimators.hull import chebyshev, interval_hull, safe_lower_bound, strip_bounds
+from h4bench.ident.estimators.chebyshev import chebyshev
+from h4bench.ident.estimators.hull import interval_hull, safe_lower_bound, strip_bounds
 from h4bench.ident.numerics import lp
 from h4bench.ident.numerics.lp import LPModel
 from tests.conftest import bounded_noise_problem

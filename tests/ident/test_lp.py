@@ -9,7 +9,8 @@ import pytest
 from scipy.optimize import linprog
 
 from h4bench.ident.numerics import lp
-from h4bench.ident.numerics.lp import LPError, LPModel, SafeBound, SafeBounds, column_scale, power2_scale, safe_lower_bound
+from h4bench.ident.numerics.lp import LPError, LPModel, column_scale, power2_scale
+from h4bench.ident.numerics.safe_bound import SafeBound, SafeBounds, safe_lower_bound
 
 
 def _random_lp(rng, m, n):
