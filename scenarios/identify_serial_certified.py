@@ -9,7 +9,7 @@ against the data, and the term that dominates the radii. An optional ``[certifie
 they apply) sets the kernel: ``kernel_steps`` (even; default none: every kernel of
 the serial family, :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle``,
 the default, or ``hann``), ``stride`` [samples] (default: a kernel of L steps takes a row every ``L // 4``
-samples, :data:`ident.robots.serial_certified.SERIAL_OVERLAP`) and ``refine`` (default :data:`REFINE`: at most that
+samples, or more often on a short log, :func:`ident.robots.serial_certified.serial_strides`) and ``refine`` (default :data:`REFINE`: at most that
 many rounds of the hull with the last box as prior, until the widths' geometric mean shrinks by less than
 :data:`REFINE_RTOL`; the first rounds on every ``coarse_step``-th window only:
 :func:`ident.estimators.uncertain_signed.signed_uncertain_hull`).
@@ -45,7 +45,7 @@ def read_kernel(spec_path) -> dict:
     """The optional ``[certified]`` table of the spec file for a serial robot: ``kernel_steps`` (even, >=
     :data:`ident.processing.choice.MIN_KERNEL_STEPS`; default None: the rows of every kernel of the serial family,
     :func:`ident.robots.serial_certified.certified_family`), ``kernel_shape`` (``triangle`` or ``hann``),
-    ``stride`` [samples] (default None: each kernel's ``L //`` :data:`ident.robots.serial_certified.SERIAL_OVERLAP`),
+    ``stride`` [samples] (default None: :func:`ident.robots.serial_certified.serial_strides`),
     ``refine`` (default :data:`REFINE`); the H4's ``curvature_every`` does
     not apply. Errors name ``--spec`` and the file."""
     path = Path(spec_path)
@@ -89,7 +89,7 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     from h4bench.ident.processing.errorspec import ErrorSpec, ErrorSpecError
     from h4bench.ident.estimators.uncertain_signed import coarse_step, signed_uncertain_hull
     from h4bench.ident.processing.motion_check import check_motion_bounds
-    from h4bench.ident.robots.serial_certified import SERIAL_OVERLAP, certified_equation, certified_family
+    from h4bench.ident.robots.serial_certified import certified_equation, certified_family, serial_strides
 
     t0 = time.perf_counter()
 
@@ -134,7 +134,7 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
                                   processes=hull_processes())
         else:
             eq = certified_equation(robot, base, q, tau, spec, half_width=kernel["kernel_steps"] // 2,
-                                    stride=kernel["stride"] or max(1, kernel["kernel_steps"] // SERIAL_OVERLAP),
+                                    stride=kernel["stride"] or serial_strides(q.shape[0], [kernel["kernel_steps"]])[0],
                                     kernel_shape=kernel["kernel_shape"],
                                     progress=stage("certified equation"))
     except ValueError as exc:

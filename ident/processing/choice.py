@@ -56,13 +56,13 @@ class KernelFamily:
     strides: tuple[int, ...]
     seconds: tuple[float, float] = (SHORTEST_S, LONGEST_S)
     factor: float = FACTOR
-    stride_divisor: int = STRIDE_DIVISOR
+    stride_rule: str = f"max(stride, L // {STRIDE_DIVISOR})"
 
     def to_dict(self) -> dict:
         return {"steps": list(self.steps), "strides": list(self.strides),
                 "rule": f"every kernel of a geometric grid (factor {self.factor:g}) from {self.seconds[0]:g} s to "
                         f"{self.seconds[1]:g} s (at most a tenth of the log), rows stacked; stride "
-                        f"max(stride, L // {self.stride_divisor})"}
+                        f"{self.stride_rule}"}
 
 
 def check_kernel_steps(steps, name: str = "kernel_steps") -> int:
@@ -78,16 +78,14 @@ def check_kernel_steps(steps, name: str = "kernel_steps") -> int:
 
 
 def kernel_family(n_samples: int, dt: float, stride: int = 1, *, even: bool = False, shortest_s: float = SHORTEST_S,
-                  longest_s: float = LONGEST_S, factor: float = FACTOR,
-                  stride_divisor: int = STRIDE_DIVISOR) -> KernelFamily:
+                  longest_s: float = LONGEST_S, factor: float = FACTOR) -> KernelFamily:
     """The kernel family of a log of ``n_samples`` samples every ``dt`` [s] (module docstring): lengths from
     ``shortest_s`` to ``longest_s`` [s] (at most a tenth of the log, at least :data:`MIN_KERNEL_STEPS` steps) on a
     geometric grid of ratio ``factor``; ``even``: even lengths only (a triangle's apex on a sample); ``stride`` :
     the stated row stride [samples] of the shortest; a kernel of L steps takes rows every ``max(stride, L //
-    stride_divisor)`` samples."""
-    for name, value in (("stride", stride), ("stride_divisor", stride_divisor)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    STRIDE_DIVISOR)`` samples."""
+    if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
+        raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
     if not (0 < shortest_s <= longest_s and factor > 1):
         raise ValueError(f"need 0 < shortest_s <= longest_s and factor > 1, got {shortest_s!r}, {longest_s!r}, "
                          f"{factor!r}")
@@ -101,9 +99,8 @@ def kernel_family(n_samples: int, dt: float, stride: int = 1, *, even: bool = Fa
         if not steps or k > steps[-1]:
             steps.append(k)
         L *= factor
-    return KernelFamily(steps=tuple(steps), strides=tuple(max(stride, k // stride_divisor) for k in steps),
-                        seconds=(float(shortest_s), float(longest_s)), factor=float(factor),
-                        stride_divisor=int(stride_divisor))
+    return KernelFamily(steps=tuple(steps), strides=tuple(max(stride, k // STRIDE_DIVISOR) for k in steps),
+                        seconds=(float(shortest_s), float(longest_s)), factor=float(factor))
 
 
 def stack_equations(eqs: list, info: dict):

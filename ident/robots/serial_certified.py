@@ -66,6 +66,7 @@ are the standard columns' radii.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -87,7 +88,7 @@ from h4bench.ident.processing.choice import kernel_family, stack_equations
 from h4bench.ident.robots.serial_steps import PARTS, inertial_rows
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
-__all__ = ["SERIAL_FAMILY", "SERIAL_OVERLAP", "CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "certified_family",
+__all__ = ["SERIAL_FAMILY", "SERIAL_OVERLAP", "SERIAL_WINDOWS", "serial_strides", "CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "certified_family",
            "check_motion_bounds", "geometry_bounds", "secant_span"]
 
 RADII_GROW = 1.0 + 2.0**-40  # outward margin on the inertial radii's float sums (>= (1 + u)^4000)
@@ -176,11 +177,19 @@ class CertifiedEquation:
 #: 1af7ca8): width over the tuned hull's, median over the 58 base parameters, 5.75 at 0.08 s, 1.76 at 0.2 s, 1.80 at
 #: 0.4 s. Each kernel costs one pass of the per-step bounds, so the family is kept to two.
 SERIAL_FAMILY = {"shortest_s": 0.2, "longest_s": 0.4, "factor": 2.0}
-#: without a stated stride, a serial kernel of L steps takes a row every L // SERIAL_OVERLAP samples (every sample in
-#: SERIAL_OVERLAP windows of each kernel). Denser rows say nearly the same: on the UR5 and Panda logs of
-#: benchmarks/bench_serial_certified.py the rows 4x denser (every L // 16) narrowed the median width by 5 % and 10 %
-#: for 2-4x the time (the hull's rounds on the denser rows at 6fc8ab8).
+#: without a stated stride, a serial kernel of L steps on a log of N samples takes a row every
+#: ``max(1, min(L // SERIAL_OVERLAP, (N - L) // SERIAL_WINDOWS))`` samples: every sample in about SERIAL_OVERLAP
+#: windows of each kernel, and at least about SERIAL_WINDOWS windows per kernel when the log is short. Denser rows
+#: say nearly the same: on the 12 s UR5 and Panda logs of benchmarks/bench_serial_certified.py the hull's rounds at
+#: 6fc8ab8 on 4x denser rows (every 20 and 25 samples) narrowed the median width by 5 % and 10 % for 2-4x the time.
 SERIAL_OVERLAP = 4
+SERIAL_WINDOWS = 128
+
+
+def serial_strides(n_samples: int, steps) -> tuple[int, ...]:
+    """The default row stride of each kernel length in ``steps`` on a log of ``n_samples`` samples
+    (:data:`SERIAL_OVERLAP`, :data:`SERIAL_WINDOWS`)."""
+    return tuple(max(1, min(int(L) // SERIAL_OVERLAP, (int(n_samples) - int(L)) // SERIAL_WINDOWS)) for L in steps)
 
 
 def _kernel_rows(args):
@@ -192,8 +201,7 @@ def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None
                      processes: int = 1, **kwargs) -> CertifiedEquation:
     """The rows of every kernel of the serial family (:data:`SERIAL_FAMILY`, even lengths), stacked: one true
     interval equation (each kernel's is), whose hull lies in each kernel's. stride : the shortest kernel's row
-    spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: every kernel's ``L //``
-    :data:`SERIAL_OVERLAP`; processes : 2 computes the longest kernel's rows in a worker process (``forkserver``)
+    spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: :func:`serial_strides`; processes : 2 computes the longest kernel's rows in a worker process (``forkserver``)
     beside the others (each kernel's rows are the same bits either way); other keywords as
     :func:`certified_equation`. ``info["kernels"]`` names the family."""
     import concurrent.futures  # noqa: PLC0415
@@ -202,8 +210,13 @@ def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None
     if processes not in (1, 2):
         raise ValueError(f"processes must be 1 or 2, got {processes!r}")
     t0 = time.perf_counter()
-    fam = kernel_family(np.asarray(q).shape[0], spec.sample_period, 1 if stride is None else int(stride), even=True,
-                        **SERIAL_FAMILY, **({"stride_divisor": SERIAL_OVERLAP} if stride is None else {}))
+    n_samples = np.asarray(q).shape[0]
+    fam = kernel_family(n_samples, spec.sample_period, 1 if stride is None else int(stride), even=True,
+                        **SERIAL_FAMILY)
+    if stride is None:
+        fam = dataclasses.replace(fam, strides=serial_strides(n_samples, fam.steps),
+                                  stride_rule=f"max(1, min(L // {SERIAL_OVERLAP}, (N - L) // {SERIAL_WINDOWS})) of a "
+                                              "log of N samples")
     k = len(fam.steps)
     pairs = list(zip(fam.steps, fam.strides))
     later = pool = None

@@ -234,9 +234,10 @@ def test_family_stacks_each_kernels_rows(robot, base, monkeypatch):
     two = sc.certified_family(robot, base, q, tau, spec, stride=10, processes=2)
     for name in ("Wc", "D", "y", "bound", "joint", "window"):
         np.testing.assert_array_equal(getattr(two, name), getattr(eq, name))
-    # no stated stride: every kernel's L // SERIAL_OVERLAP
+    # no stated stride: every kernel's L // SERIAL_OVERLAP, or denser on a short log (here 800 samples: (N - L) // 128)
     wide = sc.certified_family(robot, base, q, tau, spec)
-    assert wide.info["kernels"]["strides"] == [L // sc.SERIAL_OVERLAP for L in (40, 64)]
+    assert wide.info["kernels"]["strides"] == [min(L // sc.SERIAL_OVERLAP, (q.shape[0] - L) // sc.SERIAL_WINDOWS)
+                                               for L in (40, 64)] == list(sc.serial_strides(q.shape[0], (40, 64)))
     at = 0
     for L, st in zip(fam.steps, fam.strides):
         one = sc.certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st)
