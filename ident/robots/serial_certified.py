@@ -88,7 +88,8 @@ from h4bench.ident.processing.choice import kernel_family, stack_equations
 from h4bench.ident.robots.serial_steps import PARTS, inertial_rows
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
-__all__ = ["SERIAL_FAMILY", "SERIAL_OVERLAP", "SERIAL_WINDOWS", "serial_strides", "CertifiedEquation", "SpecCheck", "certificate", "certified_equation", "certified_family",
+__all__ = ["SERIAL_FAMILY", "SERIAL_OVERLAP", "SERIAL_WINDOWS", "serial_strides", "CertifiedEquation", "SpecCheck",
+           "certificate", "certified_equation", "certified_equations", "certified_family",
            "check_motion_bounds", "geometry_bounds", "secant_span"]
 
 RADII_GROW = 1.0 + 2.0**-40  # outward margin on the inertial radii's float sums (>= (1 + u)^4000)
@@ -192,23 +193,44 @@ def serial_strides(n_samples: int, steps) -> tuple[int, ...]:
     return tuple(max(1, min(int(L) // SERIAL_OVERLAP, (int(n_samples) - int(L)) // SERIAL_WINDOWS)) for L in steps)
 
 
-def _kernel_rows(args):
-    robot, base, q, tau, spec, L, st, kwargs = args
-    return certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st, **kwargs)
+def _one_equation(args):
+    robot, base, call_args, kwargs = args
+    return certified_equation(robot, base, *call_args, **kwargs)
+
+
+def certified_equations(robot, base, jobs, processes: int = 1) -> list:
+    """``certified_equation(robot, base, *args, **kwargs)`` of each ``(args, kwargs)`` of ``jobs``, in order; with
+    ``processes=2`` the last job runs in a worker process (``forkserver``: a clean process) beside the others and
+    its ``progress`` keyword is dropped. Each equation is the same bits either way (tested)."""
+    import concurrent.futures  # noqa: PLC0415
+    import multiprocessing  # noqa: PLC0415
+
+    if processes not in (1, 2):
+        raise ValueError(f"processes must be 1 or 2, got {processes!r}")
+    jobs = list(jobs)
+    later = pool = None
+    if processes == 2 and len(jobs) > 1:
+        args, kwargs = jobs.pop()
+        pool = concurrent.futures.ProcessPoolExecutor(max_workers=1,
+                                                      mp_context=multiprocessing.get_context("forkserver"))
+        later = pool.submit(_one_equation, (robot, base, args, {k: v for k, v in kwargs.items() if k != "progress"}))
+    try:
+        out = [certified_equation(robot, base, *args, **kwargs) for args, kwargs in jobs]
+        if later is not None:
+            out.append(later.result())
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    return out
 
 
 def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None = None, progress=None,
                      processes: int = 1, **kwargs) -> CertifiedEquation:
     """The rows of every kernel of the serial family (:data:`SERIAL_FAMILY`, even lengths), stacked: one true
     interval equation (each kernel's is), whose hull lies in each kernel's. stride : the shortest kernel's row
-    spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: :func:`serial_strides`; processes : 2 computes the longest kernel's rows in a worker process (``forkserver``)
-    beside the others (each kernel's rows are the same bits either way); other keywords as
-    :func:`certified_equation`. ``info["kernels"]`` names the family."""
-    import concurrent.futures  # noqa: PLC0415
-    import multiprocessing  # noqa: PLC0415
-
-    if processes not in (1, 2):
-        raise ValueError(f"processes must be 1 or 2, got {processes!r}")
+    spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: :func:`serial_strides`; processes : 2
+    computes the longest kernel's rows in a worker process beside the others (:func:`certified_equations`); other
+    keywords as :func:`certified_equation`. ``info["kernels"]`` names the family."""
     t0 = time.perf_counter()
     n_samples = np.asarray(q).shape[0]
     fam = kernel_family(n_samples, spec.sample_period, 1 if stride is None else int(stride), even=True,
@@ -218,23 +240,10 @@ def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None
                                   stride_rule=f"max(1, min(L // {SERIAL_OVERLAP}, (N - L) // {SERIAL_WINDOWS})) of a "
                                               "log of N samples")
     k = len(fam.steps)
-    pairs = list(zip(fam.steps, fam.strides))
-    later = pool = None
-    if processes == 2 and k > 1:  # the last (longest) kernel in the worker
-        pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
-        later = pool.submit(_kernel_rows, (robot, base, q, tau, spec, *pairs[-1], kwargs))
-        pairs = pairs[:-1]
-    eqs = []
-    try:
-        for i, (L, st) in enumerate(pairs):
-            step = None if progress is None else (lambda d, t, i=i: progress(i * t + d, k * t))
-            eqs.append(certified_equation(robot, base, q, tau, spec, half_width=L // 2, stride=st, progress=step,
-                                          **kwargs))
-        if later is not None:
-            eqs.append(later.result())
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+    jobs = [((q, tau, spec), {"half_width": L // 2, "stride": st, **kwargs,
+                              "progress": None if progress is None else (lambda d, t, i=i: progress(i * t + d, k * t))})
+            for i, (L, st) in enumerate(zip(fam.steps, fam.strides))]
+    eqs = certified_equations(robot, base, jobs, processes)
     if k == 1:
         eqs[0].info["kernels"] = fam.to_dict()
         return eqs[0]
