@@ -181,8 +181,9 @@ SERIAL_FAMILY = {"shortest_s": 0.2, "longest_s": 0.4, "factor": 2.0}
 #: without a stated stride, a serial kernel of L steps on a log of N samples takes a row every
 #: ``max(1, min(L // SERIAL_OVERLAP, (N - L) // SERIAL_WINDOWS))`` samples: every sample in about SERIAL_OVERLAP
 #: windows of each kernel, and at least about SERIAL_WINDOWS windows per kernel when the log is short. Denser rows
-#: say nearly the same: on the 12 s UR5 and Panda logs of benchmarks/bench_serial_certified.py the hull's rounds at
-#: 6fc8ab8 on 4x denser rows (every 20 and 25 samples) narrowed the median width by 5 % and 10 % for 2-4x the time.
+#: say nearly the same: on the 12 s UR5 and Panda logs of benchmarks/bench_serial_certified.py, rows every 20 and 25
+#: samples (6fc8ab8: 6324 and 7378 rows) gave median widths 0.0438 and 0.0426 of the prior against 0.0445 and
+#: 0.0435 with these (a5ad6ff: 2190 and 2555 rows), for about twice the time on the same machine load.
 SERIAL_OVERLAP = 4
 SERIAL_WINDOWS = 128
 
