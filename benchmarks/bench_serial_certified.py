@@ -43,17 +43,17 @@ Panda   40b2d46  255                  53            201       1490   0.196      
 Panda   6fc8ab8  247                  66            181       2532   0.0426       1.21              69/69
 UR5     a5ad6ff  117                  53            63        1630   0.0445       1.14              58/58
 Panda   a5ad6ff  213                  90            122       2263   0.0435       1.23              69/69
-UR5     a5ad6ff  43.6                 18.4          24.6      1630   0.0445       1.14              58/58
-Panda   a5ad6ff  76.8                 29.2          46.9      2263   0.0435       1.23              69/69
+UR5     2b4eace  43.6                 18.4          24.6      1630   0.0445       1.14              58/58
+Panda   2b4eace  76.8                 29.2          46.9      2263   0.0435       1.23              69/69
 ======  =======  ===================  ============  ========  =====  ===========  ================  ========
 
 (LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio,
 the tuned hull at the true torque bound 0.8 N m, 4.6 s for the UR5 and 6.5 s for the Panda. The UR5's first row
 is the earlier table's ``new`` run at 3217b55; its row at 7025314 ran alone on the machine, with the hull's minima
-and maxima in two processes, :mod:`ident.estimators.hull_split`, its CPU time 99 s. At a5ad6ff the rows are the
+and maxima in two processes, :mod:`ident.estimators.hull_split`, its CPU time 99 s. From a5ad6ff the rows are the
 default stride's, a row every L // 4 samples (2190 and 2555 rows, every kernel window of 50 and 90 samples against
-6324 and 7378 before): the first two a5ad6ff rows in one process (``H4BENCH_HULL_PROCESSES=1``) beside a 2-worker
-campaign, the last two alone on the machine with the family's two kernels and the hull's two halves each in two
+6324 and 7378 before): the a5ad6ff rows in one process (``H4BENCH_HULL_PROCESSES=1``) beside a 2-worker
+campaign, the 2b4eace rows (the same code for these commands) alone on the machine with the family's two kernels and the hull's two halves each in two
 processes (the same boxes, bit for bit); the hull took 6 and 7 rounds.) What changed: the q-q remainder of the Coriolis and gravity terms
 bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated exactly (1b54bd7), and
 the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069, 6fc8ab8). At 6fc8ab8
