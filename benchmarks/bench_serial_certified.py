@@ -47,20 +47,20 @@ UR5     2b4eace  43.6                 18.4          24.6      1630   0.0445     
 Panda   2b4eace  76.8                 29.2          46.9      2263   0.0435       1.23              69/69
 ======  =======  ===================  ============  ========  =====  ===========  ================  ========
 
-(LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio,
-the tuned hull at the true torque bound 0.8 N m, 4.6 s for the UR5 and 6.5 s for the Panda. The UR5's first row
-is the earlier table's ``new`` run at 3217b55; its row at 7025314 ran alone on the machine, with the hull's minima
-and maxima in two processes, :mod:`ident.estimators.hull_split`, its CPU time 99 s. From a5ad6ff the rows are the
-default stride's, a row every L // 4 samples (2190 and 2555 rows, every kernel window of 50 and 90 samples against
-6324 and 7378 before): the a5ad6ff rows in one process (``H4BENCH_HULL_PROCESSES=1``) beside a 2-worker
-campaign, the 2b4eace rows (the same code for these commands) alone on the machine with the family's two kernels and the hull's two halves each in two
-processes (the same boxes, bit for bit); the hull took 6 and 7 rounds.) What changed: the q-q remainder of the Coriolis and gravity terms
-bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated exactly (1b54bd7), and
-the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069, 6fc8ab8). At 6fc8ab8
-the Panda's hull took 9 rounds (median width / prior after each: 0.711, 0.229, 0.110, 0.0619, 0.0533, 0.0470 on
-1848 rows, 0.0448 on 3689, 0.0434 and 0.0426 on all 7378), the UR5's 8 (0.395 ... 0.0461 on 1584 rows, 0.0450
-on 3162, 0.0441 and 0.0438 on 6324); the first round on all rows cost 45 s (UR5) and 77 s (Panda) of the 99 and
-181 s.
+(LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio, the
+tuned hull at the true torque bound 0.8 N m, 4.6 s for the UR5 and 6.5 s for the Panda. The UR5's first row is the
+earlier table's ``new`` run at 3217b55; its row at 7025314 ran alone on the machine, with the hull's minima and
+maxima in two processes, :mod:`ident.estimators.hull_split`, its CPU time 99 s. From a5ad6ff the rows are the
+default stride's, a row every L // 4 samples (2190 and 2555 rows, kernel windows every 50 and 90 samples, against
+6324 and 7378 rows before). The a5ad6ff rows ran in one process (``H4BENCH_HULL_PROCESSES=1``) beside a 2-worker
+campaign; the 2b4eace rows ran alone on the machine, with the family's two kernels and the hull's two halves each in
+two processes (the same boxes, bit for bit). The hull took 6 and 7 rounds.) What changed: the q-q remainder of the
+Coriolis and gravity terms bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated
+exactly (1b54bd7), and the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069,
+6fc8ab8). At 6fc8ab8 the Panda's hull took 9 rounds (median width / prior after each: 0.711, 0.229, 0.110, 0.0619,
+0.0533, 0.0470 on 1848 rows, 0.0448 on 3689, 0.0434 and 0.0426 on all 7378), the UR5's 8 (0.395 ... 0.0461 on 1584
+rows, 0.0450 on 3162, 0.0441 and 0.0438 on 6324); the first round on all rows cost 45 s (UR5) and 77 s (Panda) of
+the 99 and 181 s.
 
 ``--compare`` (the hull's LP switches against their state at 7b00d11) was measured at 3217b55 with ``--repeats 1``
 (load 2-4): UR5 649 s former against 218 s new (hull 573 s against 171 s, 2364 against 1251 HiGHS runs, the boxes
