@@ -13,6 +13,10 @@ Measured on a loaded 2-core machine (medians over seeds 0-2, quick), the code at
 (equation + certificate) / simulation 80.4 -> 55.3 (equation 13.3 -> 14.0 s, certificate 9.15 -> 1.56 s,
 simulation 0.28 s; certify CPU 16.2 -> 11.0 s), width/tuned 0.9641 / 1.1248 / 1.0118 -> 0.9608 / 1.1219 / 1.0118,
 0 violations. ``--counts 4096 --seeds 0``: 14 -> 4 of 14 parameters at the prior (width/tuned 14.10 -> 2.77).
+At 7769cf7, alone on the machine, with the simulated friction band (``ErrorSpec.friction_band``, :mod:`sim.friction`):
+(equation + certificate) / simulation 52.4 (equation 9.08 s, certificate 0.98 s, simulation 0.19 s), width/tuned
+1.0170 / 1.1938 / 1.0781, 0 violations; 1, 2 and 1 of the 14 parameters at the prior (Coulomb friction: the steps
+within the band of a reversal carry the sign interval).
 """
 
 import _setup  # noqa: F401  (repository root on sys.path, --threads)
