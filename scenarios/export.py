@@ -91,8 +91,9 @@ def run_error_spec(run_dir):
     A certified run's own ``error_model`` (result.json) when it has one; else the certified scenario's statement
     for a simulated run (:func:`scenarios.certificate.simulated_error_spec` with the ``certified`` kind's
     ``[error_model]`` defaults): the dataset's sample period and encoder counts (``dataset.json``), the injected
-    torque error's bound (result.json ``noise.bound``) and the reference trajectory's peaks (``trajectory.npz``)
-    times the tracking margins. Returns ``(ErrorSpec, dict)``.
+    torque error's bound (result.json ``noise.bound``), the reference trajectory's peaks (``trajectory.npz``)
+    times the tracking margins and the friction band of the shipped model's friction rows (a certified run on
+    another model has its own in ``result.json``). Returns ``(ErrorSpec, dict)``.
     """
     from h4bench.ident.processing.errorspec import ErrorSpec
     from h4bench.scenarios import registry

@@ -60,6 +60,13 @@ def test_the_spec_is_the_runs_true_specification(exported):
     assert "float rounding" in em["sources"]["torque_error"]
     assert np.allclose(em["qd_max"], 1.25 * qd_ref, rtol=1e-15) and np.allclose(em["qdd_max"], 2.0 * qdd_ref,
                                                                                   rtol=1e-15)
+    # the simulator's soft friction: Coulomb's only above (qdd_max + R Fs_max) / b (sim.friction, the shipped model,
+    # Fs_max the prior's upper bound 2 N m)
+    from h4bench.sim.friction import friction_band
+    from h4bench.sim.model import load_model
+
+    np.testing.assert_array_equal(em["friction_band"], friction_band(load_model(), em["qdd_max"], 2.0))
+    assert "soft friction" in em["sources"]["friction_band"]
     # the certified scenario's [certified] table: kernel_steps 0, every kernel of the family
     assert spec["certified"]["kernel_steps"] == 0 and "sources" in em
 
