@@ -23,8 +23,8 @@ was optimal for that objective; the working sets are a few hundred rows, so memo
 
 When a model becomes infeasible, or the safe bounds of two endpoints cross (``lower_i > upper_i``, itself a
 proof that the rows seen are inconsistent), the verdict is the batch estimator's: a Chebyshev LP over all rows
-seen decides (:func:`ident.estimators.chebyshev.chebyshev`); if the emptiness is proven, :class:`~ident.InconsistentDataError`
-is raised and **the rejected block is dropped**: the object is left exactly as before the update (rows seen,
+seen decides (:func:`ident.estimators.chebyshev.chebyshev`); if the emptiness is proven,
+:class:`~ident.InconsistentDataError` is raised and **the rejected block is dropped**: the object is left exactly as before the update (rows seen,
 box, working sets; the HiGHS models that had taken rows of the block are rebuilt from their working sets), so
 later consistent blocks can still be added. If it is not proven (the set is thinner than the LP tolerance),
 the box of the batch :func:`ident.estimate` on all rows seen is returned (it encloses a slightly inflated set)

@@ -218,8 +218,8 @@ class LPSolution:
     stopped at the per-solve budget, :meth:`LPModel.solve`); on 'optimal', ``x`` (n,) the solution in the
     model's original coordinates (float, unverified), ``z`` (n,) the same as a shift from the centre; on
     'optimal' and 'limit', ``duals`` (m,) the row duals of the ORIGINAL (unscaled) rows for the ORIGINAL cost
-    (zeros when HiGHS gives none, then ``dual_valid`` is False), usable as the dual guess of :class:`~ident.numerics.safe_bound.SafeBound`
-    (at a limit: those HiGHS holds, not optimal, still a valid guess); ``iterations`` the simplex iterations of
+    (zeros when HiGHS gives none, then ``dual_valid`` is False), usable as the dual guess of
+    :class:`~ident.numerics.safe_bound.SafeBound` (at a limit: those HiGHS holds, not optimal, still a valid guess); ``iterations`` the simplex iterations of
     this solve (both runs)."""
 
     status: str
@@ -238,8 +238,8 @@ class LPModel:
     bound or half-width). Rows are added in blocks (constraint generation friendly: :meth:`add_rows` appends);
     costs change between warm-started solves (:meth:`solve`); every HiGHS status is checked (:class:`LPError`
     on any failure, never a silent value) and the row duals are returned unscaled, for the original rows and
-    cost, so that :class:`~ident.numerics.safe_bound.SafeBound` on the original data turns them into a rigorous bound whatever the
-    scaling (Neumaier & Shcherbina, Math. Program. 99, 2004).
+    cost, so that :class:`~ident.numerics.safe_bound.SafeBound` on the original data turns them into a rigorous
+    bound whatever the scaling (Neumaier & Shcherbina, Math. Program. 99, 2004).
 
     xl, xu : (n,) finite column bounds; center : (n,) the origin of HiGHS's coordinates (default the
     midpoint of the box); col_scale : (n,) powers of two (default 1, see :meth:`scale_columns`);
