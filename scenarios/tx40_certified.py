@@ -107,7 +107,7 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
     """
     from h4bench import ident
     from h4bench.ident.processing.motion_check import check_motion_bounds
-    from h4bench.ident.robots.serial_certified import certified_equations
+    from h4bench.ident.robots.serial_certified import certified_equation
     from h4bench.scenarios.threads import hull_processes
     from h4bench.scenarios.certified_verdict import SERIAL_HINTS, prior_diagnosis, row_radius_summary
     from h4bench.scenarios.identify_serial_certified import stated_assumptions
@@ -133,13 +133,13 @@ def certify(s, cfg: dict, tuned: dict | None, progress=None) -> dict:
                          "error_model": em, "certified": {"spec_check": check.to_dict()}})
     kw = {"half_width": int(cc["half_width"]), "stride": int(cc["stride"])}
     sl = slice(s.n1, s.n1 + n2)
-    # the held-out equation in a worker process beside the identification one when 2 cores are there (same bits)
-    eq, eq_ho = certified_equations(s.robot, s.base, [
-        ((s.q[:n1], s.tau[:n1], spec), {"position_error": e[:n1], **kw,
-                                        "progress": lambda i, n: progress("certified equation", i, 2 * n)}),
-        ((s.q[sl], s.tau[sl], spec), {"position_error": e[sl], "first_sample": s.n1, **kw,
-                                      "progress": lambda i, n: progress("certified equation", n + i, 2 * n)})],
-        processes=hull_processes())
+    # each equation's second half in a worker process beside its first when 2 cores are there (same bits)
+    procs = hull_processes()
+    eq = certified_equation(s.robot, s.base, s.q[:n1], s.tau[:n1], spec, position_error=e[:n1], **kw,
+                            progress=lambda i, n: progress("certified equation", i, 2 * n), processes=procs)
+    eq_ho = certified_equation(s.robot, s.base, s.q[sl], s.tau[sl], spec, position_error=e[sl], first_sample=s.n1,
+                               **kw, progress=lambda i, n: progress("certified equation", n + i, 2 * n),
+                               processes=procs)
     t_eq = time.perf_counter() - t0
     prior = ident.Box(s.blo, s.bhi, names=s.base.names)
     refine, rtol = int(cc["refine"]), float(cc["refine_rtol"])

@@ -85,11 +85,11 @@ from h4bench.ident.processing.weakform import (
     viscous_columns,
 )
 from h4bench.ident.processing.choice import kernel_family, stack_equations
-from h4bench.ident.robots.serial_steps import PARTS, inertial_rows
+from h4bench.ident.robots.serial_steps import PARTS, inertial_family
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
 __all__ = ["SERIAL_FAMILY", "SERIAL_OVERLAP", "SERIAL_WINDOWS", "serial_strides", "CertifiedEquation", "SpecCheck",
-           "certificate", "certified_equation", "certified_equations", "certified_family",
+           "certificate", "certified_equation", "certified_family",
            "check_motion_bounds", "geometry_bounds", "secant_span"]
 
 RADII_GROW = 1.0 + 2.0**-40  # outward margin on the inertial radii's float sums (>= (1 + u)^4000)
@@ -194,44 +194,91 @@ def serial_strides(n_samples: int, steps) -> tuple[int, ...]:
     return tuple(max(1, min(int(L) // SERIAL_OVERLAP, (int(n_samples) - int(L)) // SERIAL_WINDOWS)) for L in steps)
 
 
-def _one_equation(args):
-    robot, base, call_args, kwargs = args
-    return certified_equation(robot, base, *call_args, **kwargs)
+def _inertial_piece(args):
+    robot, geo, q, e, spec, m, kernels = args
+    return inertial_family(robot, geo, q, e, spec, m, kernels)
 
 
-def certified_equations(robot, base, jobs, processes: int = 1) -> list:
-    """``certified_equation(robot, base, *args, **kwargs)`` of each ``(args, kwargs)`` of ``jobs``, in order; with
-    ``processes=2`` the last job runs in a worker process (``forkserver``: a clean process) beside the others and
-    its ``progress`` keyword is dropped. Each equation is the same bits either way (tested)."""
+def _inertial(robot, geo, q, e, spec, m: int, kernels, progress, processes: int, reference: bool) -> list:
+    """The inertial columns of each kernel ``(kern, starts)`` (:func:`ident.robots.serial_steps.inertial_family`:
+    one pass of the per-step stage for all kernels). With ``processes=2`` the windows starting in the second half
+    of the log run in a worker process (``forkserver``: a clean process) beside the first half's: each window's
+    numbers are the same bits either way (tested); only the steps near the middle are evaluated twice."""
+    if processes not in (1, 2):
+        raise ValueError(f"processes must be 1 or 2, got {processes!r}")
+    if reference:
+        from h4bench.ident.robots.serial_reference import inertial_rows_reference  # noqa: PLC0415
+
+        return [inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress)
+                for kern, starts in kernels]
+    middle = (min(int(st[0]) for _, st in kernels) + max(int(st[-1]) for _, st in kernels)) // 2
+    cut = [int(np.searchsorted(st, middle)) for _, st in kernels]
+    if processes == 1 or not any(0 < c < len(st) for c, (_, st) in zip(cut, kernels)):
+        return inertial_family(robot, geo, q, e, spec, m, kernels, progress)
     import concurrent.futures  # noqa: PLC0415
     import multiprocessing  # noqa: PLC0415
 
-    if processes not in (1, 2):
-        raise ValueError(f"processes must be 1 or 2, got {processes!r}")
-    jobs = list(jobs)
-    later = pool = None
-    if processes == 2 and len(jobs) > 1:
-        args, kwargs = jobs.pop()
-        pool = concurrent.futures.ProcessPoolExecutor(max_workers=1,
-                                                      mp_context=multiprocessing.get_context("forkserver"))
-        later = pool.submit(_one_equation, (robot, base, args, {k: v for k, v in kwargs.items() if k != "progress"}))
+    second = [(kern, st[c:]) for c, (kern, st) in zip(cut, kernels) if c < len(st)]
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
     try:
-        out = [certified_equation(robot, base, *args, **kwargs) for args, kwargs in jobs]
-        if later is not None:
-            out.append(later.result())
+        later = pool.submit(_inertial_piece, (robot, geo, q, e, spec, m, second))
+        first_k = [(kern, st[:c]) for c, (kern, st) in zip(cut, kernels) if c > 0]
+        total = sum(len(st) for _, st in kernels)
+        first = inertial_family(robot, geo, q, e, spec, m, first_k,
+                                None if progress is None else (lambda d, t: progress(d, 2 * t)))
+        rest = later.result()
+        if progress is not None:
+            progress(total, total)
     finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+        pool.shutdown(wait=True, cancel_futures=True)
+    out = []
+    it1, it2 = iter(first), iter(rest)
+    for c, (_, st) in zip(cut, kernels):
+        parts = ([next(it1)] if c > 0 else []) + ([next(it2)] if c < len(st) else [])
+        if len(parts) == 1:
+            out.append(parts[0])
+            continue
+        (w1, m1, r1, p1), (w2, m2, r2, p2) = parts
+        out.append((np.concatenate([w1, w2]), np.concatenate([m1, m2]), np.concatenate([r1, r2]),
+                    {k: np.concatenate([p1[k], p2[k]]) for k in p1}))
     return out
 
 
+def _prepare(robot, q, tau, spec: ErrorSpec, position_error):
+    """The checked log: q, tau (N, n) as float arrays, the position-error bounds e, the secant half-span m and the
+    geometry bounds (:func:`certified_equation`'s errors)."""
+    nj = robot.n_joints
+    q = np.asarray(q, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    if q.ndim != 2 or q.shape[1] != nj or tau.shape != q.shape:
+        raise ValueError(f"q, tau must both have shape (N, {nj}), got {q.shape}, {tau.shape}")
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(tau))):
+        raise ValueError("q, tau must be finite")
+    if spec.n_joints != nj:
+        raise ValueError(f"spec must describe {nj} joints, got {spec.n_joints}")
+    e = spec.position_error(q) if position_error is None else np.asarray(position_error, dtype=float)
+    if e.shape != q.shape or np.any(~np.isfinite(e)) or np.any(e < 0):
+        raise ValueError(f"position_error must be finite, >= 0, shape {q.shape}, got shape {e.shape}")
+    return q, tau, e, secant_span(spec, float(np.median(e))), geometry_bounds(robot)
+
+
+def _starts(N: int, m: int, L: int, stride: int):
+    """The first samples of a kernel's windows (L steps, every ``stride`` samples; the secants' m samples at both
+    ends)."""
+    starts = np.arange(m, N - m - L, stride)
+    if starts.size == 0:
+        raise ValueError(f"q must hold more than 2 H + 2 m = {L + 2 * m} samples for one row, got {N}")
+    return starts
+
+
 def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None = None, progress=None,
-                     processes: int = 1, **kwargs) -> CertifiedEquation:
+                     processes: int = 1, position_error=None, first_sample: int = 0, kernel_shape: str = "triangle",
+                     reference: bool = False) -> CertifiedEquation:
     """The rows of every kernel of the serial family (:data:`SERIAL_FAMILY`, even lengths), stacked: one true
     interval equation (each kernel's is), whose hull lies in each kernel's. stride : the shortest kernel's row
-    spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: :func:`serial_strides`; processes : 2
-    computes the longest kernel's rows in a worker process beside the others (:func:`certified_equations`); other
-    keywords as :func:`certified_equation`. ``info["kernels"]`` names the family."""
+    spacing [steps] (each kernel's ``max(stride, L // 16)``), or None: :func:`serial_strides`; the kernels share one
+    pass of the per-step stage, in two processes with ``processes=2`` (:func:`certified_equation`); other keywords
+    as :func:`certified_equation`. ``info["kernels"]`` names the family."""
     t0 = time.perf_counter()
     n_samples = np.asarray(q).shape[0]
     fam = kernel_family(n_samples, spec.sample_period, 1 if stride is None else int(stride), even=True,
@@ -240,12 +287,15 @@ def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None
         fam = dataclasses.replace(fam, strides=serial_strides(n_samples, fam.steps),
                                   stride_rule=f"max(1, min(L // {SERIAL_OVERLAP}, (N - L) // {SERIAL_WINDOWS})) of a "
                                               "log of N samples")
-    k = len(fam.steps)
-    jobs = [((q, tau, spec), {"half_width": L // 2, "stride": st, **kwargs,
-                              "progress": None if progress is None else (lambda d, t, i=i: progress(i * t + d, k * t))})
-            for i, (L, st) in enumerate(zip(fam.steps, fam.strides))]
-    eqs = certified_equations(robot, base, jobs, processes)
-    if k == 1:
+    for L, st in zip(fam.steps, fam.strides):
+        _check_kernel(L // 2, st)
+    q, tau, e, m, geo = _prepare(robot, q, tau, spec, position_error)
+    kernels = [(make_kernel(L, spec.sample_period, kernel_shape), _starts(q.shape[0], m, L, st))
+               for L, st in zip(fam.steps, fam.strides)]
+    inertial = _inertial(robot, geo, q, e, spec, m, kernels, progress, processes, reference)
+    eqs = [_assemble(robot, base, q, tau, spec, e, m, geo, kern, kernel_shape, starts, part, first_sample, t0)
+           for (kern, starts), part in zip(kernels, inertial)]
+    if len(eqs) == 1:
         eqs[0].info["kernels"] = fam.to_dict()
         return eqs[0]
     info = dict(eqs[0].info, half_width=None, stride=None, window_seconds=None, kernels=fam.to_dict(),
@@ -255,9 +305,15 @@ def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None
     return stack_equations(eqs, info)
 
 
+def _check_kernel(half_width, stride) -> None:
+    if int(half_width) < 2 or int(stride) < 1:
+        raise ValueError(f"half_width must be >= 2 and stride >= 1, got {half_width!r}, {stride!r}")
+
+
 def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int, stride: int,
                        first_sample: int = 0, position_error=None, progress=None,
-                       kernel_shape: str = "triangle", reference: bool = False) -> CertifiedEquation:
+                       kernel_shape: str = "triangle", reference: bool = False,
+                       processes: int = 1) -> CertifiedEquation:
     """The derived interval equation (module docstring) of a serial robot's log, for one kernel
     (:func:`certified_family` stacks a family's).
 
@@ -276,47 +332,41 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
     progress : callable(done, total) or None
     reference : True for the per-window reference computation (:mod:`ident.robots.serial_reference`: the same
         numbers up to floating-point rounding, many times slower; the oracle of the vectorised one)
+    processes : 1, or 2: the windows of the log's second half in a worker process (the same bits)
 
     Returns
     -------
     :class:`CertifiedEquation`, rows ordered window-major, joint-minor.
     """
     t0 = time.perf_counter()
+    _check_kernel(half_width, stride)
+    q, tau, e, m, geo = _prepare(robot, q, tau, spec, position_error)
+    L = 2 * int(half_width)
+    kern = make_kernel(L, spec.sample_period, kernel_shape)
+    starts = _starts(q.shape[0], m, L, int(stride))
+    inertial = _inertial(robot, geo, q, e, spec, m, [(kern, starts)], progress, processes, reference)[0]
+    return _assemble(robot, base, q, tau, spec, e, m, geo, kern, kernel_shape, starts, inertial, first_sample,
+                     t0)
+
+
+def _assemble(robot, base, q, tau, spec, e, m, geo, kern, kernel_shape, starts, inertial, first_sample,
+              t0) -> CertifiedEquation:
+    """One kernel's equation from its inertial columns (:func:`_inertial`): the generic weak-form columns, the
+    torque side, the floating-point allowance and the base columns."""
     nj = robot.n_joints
-    q = np.asarray(q, dtype=float)
-    tau = np.asarray(tau, dtype=float)
-    if q.ndim != 2 or q.shape[1] != nj or tau.shape != q.shape:
-        raise ValueError(f"q, tau must both have shape (N, {nj}), got {q.shape}, {tau.shape}")
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(tau))):
-        raise ValueError("q, tau must be finite")
-    if spec.n_joints != nj:
-        raise ValueError(f"spec must describe {nj} joints, got {spec.n_joints}")
-    H, stride = int(half_width), int(stride)
-    if H < 2 or stride < 1:
-        raise ValueError(f"half_width must be >= 2 and stride >= 1, got {half_width!r}, {stride!r}")
+    L = kern.steps
+    H = L // 2
+    stride = int(starts[1] - starts[0]) if starts.size > 1 else 1
     gamma_l = 8 * (2 * H + 4) * 2.0**-53  # a-priori error of the window sums (products and sums of L terms)
     dt = spec.sample_period
-    geo = geometry_bounds(robot)
     N = q.shape[0]
-    e = spec.position_error(q) if position_error is None else np.asarray(position_error, dtype=float)
-    if e.shape != q.shape or np.any(~np.isfinite(e)) or np.any(e < 0):
-        raise ValueError(f"position_error must be finite, >= 0, shape {q.shape}, got shape {e.shape}")
-    m = secant_span(spec, float(np.median(e)))
     qddm = spec.qdd_max
-    L = 2 * H
-    kern = make_kernel(L, dt, kernel_shape)
     K1 = kern.integrals  # int_step k, k >= 0
-    starts = np.arange(m, N - m - L, stride)
-    if starts.size == 0:
-        raise ValueError(f"q must hold more than 2 H + 2 m = {L + 2 * m} samples for one row, got {N}")
     body_of_col = np.repeat(np.arange(nj), 10)
     mask = (np.arange(nj)[:, None] <= body_of_col[None, :]).astype(float)  # (n rows, 10 n cols)
     R_ = len(starts)
-    if reference:
-        from h4bench.ident.robots.serial_reference import inertial_rows_reference as inertial
-    else:
-        inertial = inertial_rows
-    Wi, mag, recon, parts_i = inertial(robot, geo, q, e, spec, m, kern, starts, progress)
+    Wi, mag, recon, parts_i = inertial
+    parts_i = dict(parts_i)
     # ---- friction, rotor inertia, offsets (the generic weak-form columns) and the torque side
     windows = RowWindows(start=starts, steps=L)
     Fqdd, r_qdd_pos, _ = imot_columns(q, e, windows, kern)
@@ -413,6 +463,8 @@ def certified_equation(robot, base, q, tau, spec: ErrorSpec, *, half_width: int,
         full = np.zeros((R_, nj, p))
         full[:, :, :ni] = parts_i[name]
         parts[name] = flat(full)[:, ind]
+    return CertifiedEquation(Wc=Wfull[:, ind], D=D, y=y.reshape(-1), bound=bound, joint=joint, window=window,
+                             names=tuple(base.names), terms=terms, parts=parts, info=info)
     return CertifiedEquation(Wc=Wfull[:, ind], D=D, y=y.reshape(-1), bound=bound, joint=joint, window=window,
                              names=tuple(base.names), terms=terms, parts=parts, info=info)
 

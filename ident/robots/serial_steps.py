@@ -32,7 +32,7 @@ from numpy.lib.stride_tricks import as_strided
 from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.processing.weakform import Kernel
 
-__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_rows", "local_bounds", "q_remainder", "speed_linear"]
+__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_family", "inertial_rows", "local_bounds", "q_remainder", "speed_linear"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
@@ -461,38 +461,78 @@ def inertial_rows(robot, geo, q, e, spec, m: int, kern: Kernel, starts, progress
     base), recon (R, n, 10 n) the bound of the regressor reconstruction's rounding (module docstring), parts
     {name: (R, n, 10 n)} the radii of :data:`PARTS` (before masking and outward rounding).
     """
-    starts = np.asarray(starts, dtype=np.int64)
-    grid = StepGrid(q, e, spec.sample_period, spec.qdd_max, m)
-    n = grid.n
-    F = 10 * n * n
-    L, R = kern.steps, starts.size
-    stride = int(starts[1] - starts[0]) if R > 1 else 1
-    if R > 1 and np.any(np.diff(starts) != stride):
-        raise ValueError("starts must be equally spaced")
-    wt = _weights(kern)
-    wb = max(1, -(-max(L, 256) // stride))  # windows per block: about max(L, 256) new steps each
-    rc = max(1, int(memory // (8 * 4 * n * F * (L + 2 * m + 2))))  # windows per batch of pair terms
-    buf = _StepBuffer(robot, geo, grid, (wb - 1) * stride + L + 2)
-    names = ("Wi", "mag", "recon") + PARTS
-    out = {name: np.empty((R, F)) for name in names}
-    c_rec = 2 * (n + 5) * U * (1 + 2 * (L * (n + 3) + 2) * U) * (1 + 4 * U)  # module docstring; the sum's rounding
-    for b0 in range(0, R, wb):
-        blk = starts[b0: b0 + wb]
-        buf.advance(int(blk[0]) - 1, int(blk[-1]) + L + 1)
-        for r0 in range(0, blk.size, rc):
-            sub = blk[r0: r0 + rc]
-            cor, u = _correlations(buf, grid, wt, sub, stride)
-            pair = _pair_terms(buf, grid, wt, sub, stride, u)
-            rows = slice(b0 + r0, b0 + r0 + sub.size)
+    return inertial_family(robot, geo, q, e, spec, m, [(kern, starts)], progress, memory=memory)[0]
+
+
+class _KernelRows:
+    """One kernel's windows and output arrays in :func:`inertial_family`."""
+
+    def __init__(self, kern: Kernel, starts, n: int, m: int, memory: int):
+        self.starts = np.asarray(starts, dtype=np.int64)
+        self.L, self.R = kern.steps, self.starts.size
+        if self.R == 0:
+            raise ValueError("starts must hold at least one window")
+        self.stride = int(self.starts[1] - self.starts[0]) if self.R > 1 else 1
+        if self.R > 1 and (self.stride < 1 or np.any(np.diff(self.starts) != self.stride)):
+            raise ValueError("starts must be equally spaced and increasing")
+        F = 10 * n * n
+        self.wt = _weights(kern)
+        self.rc = max(1, int(memory // (8 * 4 * n * F * (self.L + 2 * m + 2))))  # windows per batch of pair terms
+        # module docstring; the sum's rounding
+        self.c_rec = 2 * (n + 5) * U * (1 + 2 * (self.L * (n + 3) + 2) * U) * (1 + 4 * U)
+        self.out = {name: np.empty((self.R, F)) for name in ("Wi", "mag", "recon") + PARTS}
+        self.done = 0  # windows computed
+
+    def compute(self, buf: _StepBuffer, grid: StepGrid, upto: int) -> None:
+        """The windows ``done .. upto - 1`` (their steps held by ``buf``)."""
+        out, L = self.out, self.L
+        for r0 in range(self.done, upto, self.rc):
+            sub = self.starts[r0: min(upto, r0 + self.rc)]
+            cor, u = _correlations(buf, grid, self.wt, sub, self.stride)
+            pair = _pair_terms(buf, grid, self.wt, sub, self.stride, u)
+            rows = slice(r0, r0 + sub.size)
             out["Wi"][rows] = pair["Wi"] + cor["gK"]
             out["mag"][rows] = pair["mag"] + cor["mag"]
-            out["recon"][rows] = up(up((pair["rsum"] + cor["rsum"]) * c_rec) + up(cor["Jf"] * (1 + 2 * (L + 2) * U)))
+            out["recon"][rows] = up(up((pair["rsum"] + cor["rsum"]) * self.c_rec)
+                                    + up(cor["Jf"] * (1 + 2 * (L + 2) * U)))
             for name in PARTS:
                 out[name][rows] = cor[name]
             out["coriolis_position"][rows] += pair["cG"]
             out["speed_position"][rows] += pair["sG"]
+        self.done = upto
+
+    def result(self, n: int):
+        sh = (self.R, n, 10 * n)
+        o = self.out
+        return o["Wi"].reshape(sh), o["mag"].reshape(sh), o["recon"].reshape(sh), {k: o[k].reshape(sh) for k in PARTS}
+
+
+def inertial_family(robot, geo, q, e, spec, m: int, kernels, progress=None, *, memory: int = 2**27) -> list:
+    """:func:`inertial_rows` of several kernels in one pass over the log: ``kernels`` a list of ``(kern, starts)``;
+    returns one ``(Wi, mag, recon, parts)`` per kernel, in order.
+
+    Every step's pinocchio stage (:func:`local_bounds`, most of the time) is evaluated once for all the kernels:
+    the log is walked in blocks of about ``max(L_max, 256)`` window starts, and each block's windows of every
+    kernel read the same held steps. The steps a window reads, and each window's arithmetic, are those of the
+    kernel alone: the same bits (tests/ident/test_serial_certified.py)."""
+    grid = StepGrid(q, e, spec.sample_period, spec.qdd_max, m)
+    n = grid.n
+    rows = [_KernelRows(kern, starts, n, m, memory) for kern, starts in kernels]
+    L_max = max(k.L for k in rows)
+    span = max(L_max, 256)  # window starts per block
+    buf = _StepBuffer(robot, geo, grid, span + L_max + 2)
+    total = sum(k.R for k in rows)
+    while True:
+        todo = [k for k in rows if k.done < k.R]
+        if not todo:
+            break
+        first = min(int(k.starts[k.done]) for k in todo)
+        upto = [int(np.searchsorted(k.starts, first + span, side="left")) for k in todo]
+        end = max(int(k.starts[u - 1]) + k.L + 1 for k, u in zip(todo, upto) if u > k.done)
+        buf.advance(first - 1, end)
+        for k, u in zip(todo, upto):
+            if u > k.done:
+                k.compute(buf, grid, u)
         if progress is not None:
-            progress(min(R, b0 + wb), R)
-    sh = (R, n, 10 * n)
-    return (out["Wi"].reshape(sh), out["mag"].reshape(sh), out["recon"].reshape(sh),
-            {name: out[name].reshape(sh) for name in PARTS})
+            progress(sum(k.done for k in rows), total)
+    return [k.result(n) for k in rows]

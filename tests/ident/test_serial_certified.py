@@ -219,7 +219,8 @@ def test_bad_inputs_are_named(robot, base):
 
 def test_family_stacks_each_kernels_rows(robot, base, monkeypatch):
     """certified_family: the rows of each kernel of the family, as certified_equation gives them alone (the
-    oracle), stacked in the family's order; the family named in info. A short family (40 and 64 steps) keeps it
+    oracle: the kernels share one pass of the per-step stage, each window the same bits), stacked in the family's
+    order; the family named in info. One or two processes: the same bits. A short family (40 and 64 steps) keeps it
     fast."""
     from h4bench.ident.processing.choice import kernel_family
     from h4bench.ident.robots import serial_certified as sc
@@ -230,10 +231,16 @@ def test_family_stacks_each_kernels_rows(robot, base, monkeypatch):
     assert fam.steps == (40, 64)
     eq = sc.certified_family(robot, base, q, tau, spec, stride=10)
     assert eq.info["kernels"]["steps"] == [40, 64]
-    # the longest kernel's rows in a worker process: the same bits
+    # the windows of the log's second half in a worker process: the same bits
     two = sc.certified_family(robot, base, q, tau, spec, stride=10, processes=2)
     for name in ("Wc", "D", "y", "bound", "joint", "window"):
         np.testing.assert_array_equal(getattr(two, name), getattr(eq, name))
+    one_kernel = dict(half_width=20, stride=7)  # a stride that no block boundary divides
+    a = sc.certified_equation(robot, base, q, tau, spec, **one_kernel)
+    b = sc.certified_equation(robot, base, q, tau, spec, **one_kernel, processes=2)
+    for k in a.terms:
+        np.testing.assert_array_equal(b.terms[k], a.terms[k])
+    np.testing.assert_array_equal(b.Wc, a.Wc)
     # no stated stride: every kernel's L // SERIAL_OVERLAP, or denser on a short log (here 800 samples: (N - L) // 128)
     wide = sc.certified_family(robot, base, q, tau, spec)
     assert wide.info["kernels"]["strides"] == [min(L // sc.SERIAL_OVERLAP, (q.shape[0] - L) // sc.SERIAL_WINDOWS)
