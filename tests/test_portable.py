@@ -41,6 +41,15 @@ def test_jacobi_svd_matches_lapacks_singular_values_and_vectors(rng):
     batch = rng.standard_normal((50, 4, 4))
     np.testing.assert_allclose(portable.cond(batch), np.linalg.cond(batch), rtol=1e-10)
     assert np.array_equal(portable.jacobi_svd(batch[3]), portable.jacobi_svd(batch)[3])
+    # the disjoint pairs rotated together (waves): LAPACK's values and vectors too, a batch member's own bits
+    s_w, v_w = portable.jacobi_svd(a, vectors=True, waves=True)
+    np.testing.assert_allclose(s_w, ref, rtol=1e-12, atol=1e-15 * 100 * ref[0])
+    np.testing.assert_allclose(a.T @ a @ v_w, v_w * s_w**2, rtol=1e-9, atol=1e-9 * s_w[0] ** 2)
+    np.testing.assert_allclose(v_w.T @ v_w, np.eye(7), atol=1e-13)
+    wide = rng.standard_normal((3, 80, 69)) * np.logspace(-3, 3, 69)
+    got = portable.jacobi_svd(wide, waves=True)
+    np.testing.assert_allclose(got, np.linalg.svd(wide, compute_uv=False), rtol=1e-10)
+    assert np.array_equal(portable.jacobi_svd(wide[1], waves=True), got[1])
     assert portable.cond(np.array([[1.0, 2.0], [2.0, 4.0]])) == np.inf or portable.cond(
         np.array([[1.0, 2.0], [2.0, 4.0]])) > 1e15
 

@@ -71,7 +71,7 @@ def identifiability(W: np.ndarray, names, *, rcond: float = 1e-7, gram=None) -> 
     G = pmatmul(W.T, W) if gram is None else gram
     d = np.sqrt(np.diag(G))
     d[d == 0.0] = 1.0
-    sv, V = jacobi_svd(G / d[:, None] / d[None, :], vectors=True)  # no LAPACK: the same bits on any CPU
+    sv, V = jacobi_svd(G / d[:, None] / d[None, :], vectors=True, waves=True)  # no LAPACK: any CPU's bits
     lam, V = sv[::-1], V[:, ::-1]  # eigenvalues of the PSD Gram matrix, ascending (as eigh's)
     sig = np.sqrt(np.clip(lam, 0.0, None))
     smax = sig[-1] if sig.size else 0.0
