@@ -23,6 +23,12 @@ WARM_ROWS = True
 #: the first refinement rounds use about this many row groups (kernel windows), at least (:func:`coarse_step`); the
 #: per-round widths and seconds on fewer and on all rows: benchmarks/bench_serial_certified.py prints them
 COARSE_GROUPS = 256
+#: HiGHS options of every round's hull LPs: the dual simplex. Each round starts from the previous round's bases
+#: with a new right-hand side and radius (the last box's chords), where the dual simplex took 14 % (UR5, 58
+#: parameters) and 19 % (Panda, 69) less time than the primal simplex of the point hulls (same boxes; one process,
+#: the logs of benchmarks/bench_serial_certified.py at 007d532); the point hulls keep the primal simplex, faster
+#: there (1.8 s against 3.2 s for the Panda's tuned hull)
+SIGNED_SIMPLEX = {"simplex_strategy": 1}
 
 
 def coarse_step(n_groups: int) -> int:
@@ -123,7 +129,7 @@ def _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, grou
         extra = up(up(y2hi - y2lo) + up(pmatmul(D, np.abs(lo1))) * (1 + 4 * Wc.shape[1] * 2.0**-53))
         b2 = up(np.asarray(bound, dtype=float) + extra)
         sub, warm = uncertain_hull_rows(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names),
-                                        warm=warm if WARM_ROWS else None, split=split)
+                                        warm=warm if WARM_ROWS else None, split=split, lp_options=SIGNED_SIMPLEX)
         lo_f = np.nextafter(lo1 + sub.lower, -np.inf)
         hi_f = np.nextafter(lo1 + sub.upper, np.inf)
         new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))
