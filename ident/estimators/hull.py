@@ -117,24 +117,49 @@ def _violated_rows(W, dx_cols, m0, thr, skip):
 
     Returns ``(rows, dev)`` with ``dev[r, j] = |W_rows[r] dx_j - m0|``; one blocked pass over ``W``
     (computed transposed, ``dx^T W^T``, so that the reduction over the k solutions runs along contiguous rows).
-    """
+
+    Which rows join the working set is a choice, so it is the same on any CPU and BLAS thread count: the pass runs
+    through BLAS (fast), and every row that BLAS's rounding could have decided otherwise (within ``g (|dx|^T |W_k| +
+    |m0_k|)`` of its threshold, ``g`` twice the ``gamma_(p + 2)`` of any summation order, with or without fused
+    multiply-adds) is decided again, with its deviations, by :func:`_dots` (element-wise operations in a fixed
+    order: each row's bits whatever the other rows)."""
     n, k = W.shape[0], dx_cols.shape[1]
     xt = np.ascontiguousarray(dx_cols.T)
+    axt = np.abs(xt)
+    g = 4.0 * (W.shape[1] + 2) * 2.0**-53
     rows, devs = [], []
     buf = np.empty(k * min(n, _CHUNK))
+    bnd = np.empty(k * min(n, _CHUNK))
     for s in range(0, n, _CHUNK):
         e = min(n, s + _CHUNK)
         a = buf[: k * (e - s)].reshape(k, e - s)  # contiguous, so matmul writes through BLAS
         np.matmul(xt, W[s:e].T, out=a)
         a -= m0[s:e]
         np.abs(a, out=a)
-        hit = np.flatnonzero((a.max(axis=0) > thr[s:e]) & ~skip[s:e])
-        if hit.size:
-            rows.append(hit + s)
-            devs.append(a[:, hit].T.copy())
+        c = bnd[: k * (e - s)].reshape(k, e - s)
+        np.matmul(axt, np.abs(W[s:e]).T, out=c)
+        c += np.abs(m0[s:e])
+        c *= g
+        c += a
+        near = np.flatnonzero((c.max(axis=0) > thr[s:e]) & ~skip[s:e]) + s
+        if near.size:
+            exact = np.abs(_dots(xt, W[near]) - m0[near])
+            hit = exact.max(axis=0) > thr[near]
+            if np.any(hit):
+                rows.append(near[hit])
+                devs.append(exact[:, hit].T.copy())
     if not rows:
         return np.zeros(0, dtype=np.int64), np.zeros((0, k))
     return np.concatenate(rows), np.vstack(devs)
+
+
+def _dots(xt, Wr):
+    """(k, r) ``xt Wr^T`` summed column by column in the order of j (element-wise operations: every entry the same
+    bits on any CPU, whatever the number of rows r)."""
+    acc = xt[:, :1] * Wr[:, 0]
+    for j in range(1, xt.shape[1]):
+        acc += xt[:, j:j + 1] * Wr[:, j]
+    return acc
 
 
 def _row_norms(W, d):

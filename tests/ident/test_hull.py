@@ -413,3 +413,27 @@ def test_chebyshev_stopped_by_its_budget_still_brackets_the_minimax(monkeypatch)
         assert ch.info["lp_fallback"] and ch.info["lp_fallbacks"] == 1 and not ch.info["converged"]
         assert 0.0 <= ch.lower <= ref <= ch.upper
         assert np.max(np.abs(y - W @ ch.theta)) <= ch.upper
+
+
+def test_violated_rows_are_the_einsum_decision_whatever_blas_rounds():
+    """hull._violated_rows scans with BLAS but decides every row BLAS's rounding could flip by sums in a fixed order: its rows and deviations are those of that computation alone, bit for bit, also for rows whose
+    deviation lies on their threshold (the oracle: the sums in the order of j over all rows at once)."""
+    from h4bench.ident.estimators.hull import _violated_rows
+
+    rng = np.random.default_rng(5)
+    W = rng.standard_normal((20000, 23)) * np.logspace(-3, 3, 23)
+    dx = rng.standard_normal((23, 6))
+    m0 = rng.standard_normal(20000)
+    acc = dx.T[:, :1] * W[:, 0]
+    for j in range(1, 23):
+        acc = acc + dx.T[:, j:j + 1] * W[:, j]
+    exact = np.abs(acc - m0)
+    thr = np.quantile(exact.max(axis=0), 0.9) * np.ones(20000)
+    on = rng.choice(20000, 300, replace=False)
+    thr[on] = exact.max(axis=0)[on] * rng.choice([1.0 - 2.0**-52, 1.0, 1.0 + 2.0**-52], 300)  # on the edge
+    skip = np.zeros(20000, dtype=bool)
+    skip[:50] = True
+    rows, dev = _violated_rows(W, dx, m0, thr, skip)
+    want = np.flatnonzero((exact.max(axis=0) > thr) & ~skip)
+    np.testing.assert_array_equal(rows, want)
+    np.testing.assert_array_equal(dev, exact[:, want].T)
