@@ -11,14 +11,15 @@ and ``np.einsum`` without ``optimize`` (numpy's own loops, never BLAS), in an or
 - :func:`det4`, :func:`solve4`: determinant and solution of 4 x 4 systems by cofactors (batched);
 - :func:`jacobi_svd`: singular values (and right singular vectors) by one-sided Jacobi rotations (batched),
   :func:`cond`: the 2-norm condition number from them, :func:`lstsq`: the minimum-norm least-squares solution
-  with a relative cut-off (``np.linalg.lstsq``'s ``rcond``).
+  with a relative cut-off (``np.linalg.lstsq``'s ``rcond``), :func:`qr_pivoted`: the column order and R's diagonal
+  of a Householder QR with column pivoting (ties broken by the column order, not by rounding).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cond", "det4", "jacobi_svd", "lstsq", "matmul", "solve4"]
+__all__ = ["PIVOT_TIE", "cond", "det4", "jacobi_svd", "lstsq", "matmul", "qr_pivoted", "solve4"]
 
 
 def matmul(a, b) -> np.ndarray:
@@ -178,11 +179,53 @@ def cond(a) -> np.ndarray:
 
 
 def lstsq(a, b, rcond: float = 1e-12) -> np.ndarray:
-    """The minimum-norm least-squares solution x (n,) of ``a x ~ b`` for a (m, n), m >= n, b (m,): singular
-    values below ``rcond`` times the largest are dropped (as ``np.linalg.lstsq(a, b, rcond)[0]``), from
-    :func:`jacobi_svd` (``waves``): ``x = V diag(1/s) U^T b`` with ``U = a V diag(1/s)``. Same bits on any CPU."""
+    """The minimum-norm least-squares solution x of ``a x ~ b`` for a (m, n), m >= n, b (m,) or (m, k) (x (n,) or
+    (n, k)): singular values below ``rcond`` times the largest are dropped (as ``np.linalg.lstsq(a, b,
+    rcond)[0]``), from :func:`jacobi_svd` (``waves``): ``x = V diag(1/s) U^T b`` with ``U = a V diag(1/s)``. Same
+    bits on any CPU."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     s, v = jacobi_svd(a, vectors=True, waves=True)
     keep = s > rcond * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, dtype=bool)
     u = matmul(a, v[:, keep]) / s[keep]
+    if b.ndim == 2:
+        return matmul(v[:, keep], matmul(u.T, b) / s[keep][:, None])
     return matmul(v[:, keep], matmul(b, u) / s[keep])
+
+
+#: columns whose norm is within this factor of the largest are tied in :func:`qr_pivoted` (the first of them in the
+#: original order is taken): rounding cannot choose between them
+PIVOT_TIE = 1e-10
+
+
+def qr_pivoted(a):
+    """Householder QR with column pivoting (Businger and Golub) of a (m, n), m >= n: ``(d, piv)``, the magnitudes
+    (n,) of R's diagonal and the column order (n,) (``a[:, piv] = Q R``). Each step takes the remaining column of
+    largest norm, the norms recomputed from the reduced columns (never down-dated); columns within
+    :data:`PIVOT_TIE` of the largest count as equal and the first of them in a's order is taken (LAPACK's
+    ``geqp3`` leaves such ties to its rounding, which differs by CPU). Same bits on any CPU."""
+    r = np.array(np.asarray(a, float).T, order="C")  # (n, m): column j of a is row j, contiguous
+    n, m = r.shape
+    if m < n:
+        raise ValueError(f"a must have at least as many rows as columns, got shape {(m, n)}")
+    piv = np.arange(n)
+    d = np.zeros(n)
+    for k in range(n):
+        rest = r[k:, k:]
+        norms = np.einsum("ji,ji->j", rest, rest)
+        top = norms.max()
+        tied = np.flatnonzero(norms >= top * (1.0 - PIVOT_TIE))
+        j = k + int(tied[np.argmin(piv[k + tied])])
+        if j != k:
+            r[[k, j]] = r[[j, k]]
+            piv[[k, j]] = piv[[j, k]]
+        nx = float(np.sqrt(norms[j - k]))
+        d[k] = nx
+        if nx == 0.0:
+            break  # every remaining column is zero: their diagonal entries stay 0
+        x = r[k, k:].copy()
+        x[0] -= -nx if x[0] >= 0 else nx
+        vv = float(np.einsum("i,i->", x, x))
+        if vv > 0.0 and k + 1 < n:
+            below = r[k + 1:, k:]
+            below -= np.einsum("ji,i->j", below, x)[:, None] * (2.0 / vv) * x
+    return d, piv

@@ -1,6 +1,7 @@
 """Same seed, same numbers under any BLAS kernel and thread count: a short paper experiment (designed trajectory,
 controller, feed-forward, simulation, hull box) in fresh processes with ``OPENBLAS_CORETYPE`` in {Haswell,
-SandyBridge} x ``OPENBLAS_NUM_THREADS`` in {1, 2}, each with its own empty design cache.
+SandyBridge} x ``OPENBLAS_NUM_THREADS`` in {1, 2}, each with its own empty design cache; and a serial arm's base
+parameters and prior.
 
 OpenBLAS is built with DYNAMIC_ARCH in numpy's and scipy's wheels: the kernel it runs is chosen by CPU, and
 ``OPENBLAS_CORETYPE`` forces the one another CPU would pick (SandyBridge: AVX without FMA; Haswell: AVX2 with
@@ -46,7 +47,12 @@ W = rng.standard_normal((400, 8))
 D = 0.01 * np.abs(rng.standard_normal((400, 8)))
 y = np.einsum("ij,j->i", W, rng.uniform(-1, 1, 8)) + rng.uniform(-0.5, 0.5, 400)
 ubox = signed_uncertain_hull(W, D, y, np.full(400, 0.5), Box(-2 * np.ones(8), 2 * np.ones(8)), refine=2)
-print(json.dumps({"hashes": run.content_hashes, "lower": [float(v).hex() for v in hull.lower],
+# a serial arm's base parameters and physical prior (column-pivoted QR, least squares, the prior's map)
+from h4bench.scenarios.identify import urdf_robot_and_prior
+_, base, prior = urdf_robot_and_prior("examples/own_arm/ur5.urdf")
+serial = {"names": list(base.names), "beta": [float(v).hex() for v in base.beta.ravel()],
+          "prior": [float(v).hex() for v in prior["lower"] + prior["upper"]]}
+print(json.dumps({"hashes": run.content_hashes, "lower": [float(v).hex() for v in hull.lower], "serial": serial,
                   "uncertain": [float(v).hex() for v in np.concatenate([ubox.lower, ubox.upper])],
                   "upper": [float(v).hex() for v in hull.upper],
                   "enclosed": bool(np.all((hull.lower <= run.theta_true) & (run.theta_true <= hull.upper))),
@@ -88,6 +94,16 @@ def test_design_controller_dataset_and_hull_box_are_the_same_bits_everywhere(run
         assert r["hashes"] == first["hashes"], (setting, r["hashes"], first["hashes"])
         assert (r["lower"], r["upper"]) == (first["lower"], first["upper"]), setting
         assert r["enclosed"] is True, setting
+
+
+def test_a_serial_arms_base_and_prior_are_the_same_bits_everywhere(runs):
+    """The UR5's base parameters (which columns, their combinations) and the physical prior they map: computed by
+    h4bench.portable (at 396da6f by LAPACK's pivoted QR, whose ties between equal columns followed the rounding,
+    and the prior's last bits the BLAS threads)."""
+    first = next(iter(runs.values()))["serial"]
+    assert len(first["names"]) == 58
+    for setting, r in runs.items():
+        assert r["serial"] == first, setting
 
 
 def test_the_signed_uncertain_hull_is_the_same_bits_everywhere(runs):

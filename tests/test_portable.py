@@ -63,6 +63,32 @@ def test_lstsq_is_numpys_minimum_norm_solution_with_the_same_cutoff(rng):
                                np.linalg.lstsq(deficient, b, rcond=1e-12)[0], rtol=1e-9, atol=1e-12)
 
 
+def test_lstsq_takes_several_right_hand_sides(rng):
+    a, b = rng.standard_normal((50, 7)), rng.standard_normal((50, 3))
+    x = portable.lstsq(a, b)
+    np.testing.assert_allclose(x, np.linalg.lstsq(a, b, rcond=None)[0], rtol=1e-11)
+    assert np.array_equal(x[:, 1], portable.lstsq(a, b[:, 1]))  # or each column alone: the same bits
+
+
+def test_qr_pivoted_is_lapacks_column_order_and_breaks_ties_by_the_columns_order(rng):
+    import scipy.linalg
+
+    a = rng.standard_normal((300, 40)) * np.logspace(-2, 2, 40)  # distinct norms at every step
+    d, piv = portable.qr_pivoted(a)
+    _, R, piv_lapack = scipy.linalg.qr(a, mode="economic", pivoting=True)
+    np.testing.assert_array_equal(piv, piv_lapack)
+    np.testing.assert_allclose(d, np.abs(np.diag(R)), rtol=1e-12)
+    # equal columns (3 and 7; 0 scaled by -1 as 8): the first of them in a's order goes first, the others to the
+    # null part, whatever the rounding of their norms
+    b = np.column_stack([a[:, :5], a[:, 0] * 0.5, a[:, 1] + a[:, 2], a[:, 3], -a[:, 0]])
+    d, piv = portable.qr_pivoted(b)
+    assert piv.tolist().index(3) < piv.tolist().index(7) and piv.tolist().index(0) < piv.tolist().index(8)
+    assert np.all(d[5:] < 1e-12 * d[0]) and np.all(d[:5] > 1e-3 * d[0])
+    assert not {7, 8} & set(piv[:5].tolist())  # the later copies are the dependent ones
+    with pytest.raises(ValueError, match="rows"):
+        portable.qr_pivoted(np.ones((2, 3)))
+
+
 def test_the_design_iterates_are_snapped_to_a_binary_grid():
     from h4bench.trajectories.design import SNAP, snap
 

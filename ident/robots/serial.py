@@ -40,8 +40,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.validation import as_float_array, check_finite
+from h4bench.portable import lstsq, matmul, qr_pivoted
 
-__all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters", "default_reach", "physical_prior"]
+__all__ = ["INERTIAL_NAMES", "BaseParameters", "SerialRobot", "base_parameters", "default_reach", "norm3",
+           "physical_prior"]
 
 INERTIAL_NAMES = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")  # pinocchio's order
 _INERTIAL_UNITS = ("kg", "kg m", "kg m", "kg m") + ("kg m^2",) * 6
@@ -100,7 +102,7 @@ class BaseParameters:
         if theta.shape[-1] != self.matrix.shape[1]:
             raise ValueError(f"theta must have {self.matrix.shape[1]} standard parameters (last axis), got "
                              f"shape {theta.shape}")
-        return theta @ self.matrix.T
+        return matmul(theta, self.matrix.T)
 
     def regressor(self, W) -> np.ndarray:
         """(m, r) base regressor: the independent columns of a standard regressor W (m, p)."""
@@ -116,9 +118,15 @@ class BaseParameters:
         if lower.shape != (p,) or upper.shape != (p,) or np.any(lower > upper):
             raise ValueError(f"lower, upper must be (p,) = ({p},) with lower <= upper, got {lower.shape}, {upper.shape}")
         mid, rad = 0.5 * (lower + upper), 0.5 * (upper - lower)
-        c, r = self.matrix @ mid, np.abs(self.matrix) @ rad
-        slack = 4.0 * p * np.finfo(float).eps * (np.abs(self.matrix) @ np.maximum(np.abs(lower), np.abs(upper)))
+        c, r = matmul(self.matrix, mid), matmul(np.abs(self.matrix), rad)
+        slack = 4.0 * p * np.finfo(float).eps * matmul(np.abs(self.matrix), np.maximum(np.abs(lower), np.abs(upper)))
         return np.nextafter(c - r - slack, -np.inf), np.nextafter(c + r + slack, np.inf)
+
+
+def norm3(v) -> float:
+    """The Euclidean norm of a short vector without BLAS (its dot product's kernel differs by CPU)."""
+    v = np.asarray(v, dtype=float)
+    return float(np.sqrt(np.einsum("i,i->", v, v)))
 
 
 def _expression(i_col: int, dep: np.ndarray, row: np.ndarray, names) -> str:
@@ -136,8 +144,6 @@ def base_parameters(W, names, units=None, *, tol: float = 1e-8, clean: float = 1
     column-pivoted QR; clean : coefficients of beta below ``clean`` (relative to the largest entry of its row
     and to 1) are set to 0 (rounding residue of exact structural dependences).
     """
-    import scipy.linalg
-
     W = np.asarray(W, dtype=float)
     if W.ndim != 2 or W.shape[0] < W.shape[1]:
         raise ValueError(f"W must have shape (m, p) with m >= p (enough random states), got {W.shape}")
@@ -146,8 +152,9 @@ def base_parameters(W, names, units=None, *, tol: float = 1e-8, clean: float = 1
     if len(names) != p:
         raise ValueError(f"names must have {p} entries to match W's columns, got {len(names)}")
     units = tuple(units) if units is not None else ("",) * p
-    _, R, piv = scipy.linalg.qr(W, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
+    # no LAPACK/BLAS (h4bench.portable): the base, its matrix and the prior it maps are the same bits on any CPU
+    # and thread count, and equal columns are ordered by name, not by rounding
+    d, piv = qr_pivoted(W)
     if d[0] == 0.0:
         raise ValueError("W is zero: no parameter affects the torques")
     r = int(np.sum(d > tol * d[0]))
@@ -155,13 +162,14 @@ def base_parameters(W, names, units=None, *, tol: float = 1e-8, clean: float = 1
     independent = np.sort(piv[:r])
     dependent = np.sort(piv[r:])
     WI = W[:, independent]
-    beta = np.linalg.lstsq(WI, W[:, dependent], rcond=None)[0] if dependent.size else np.zeros((r, 0))
+    beta = (lstsq(WI, W[:, dependent], rcond=float(np.finfo(float).eps * max(W.shape))) if dependent.size
+            else np.zeros((r, 0)))
     scale = np.maximum(np.abs(beta).max(axis=1, keepdims=True, initial=0.0), 1.0)
     beta = np.where(np.abs(beta) < clean * scale, 0.0, beta)
     B = np.zeros((r, p))
     B[np.arange(r), independent] = 1.0
     B[:, dependent] = beta
-    resid = float(np.max(np.abs(W[:, dependent] - WI @ beta), initial=0.0)) / float(np.max(np.abs(W)))
+    resid = float(np.max(np.abs(W[:, dependent] - matmul(WI, beta)), initial=0.0)) / float(np.max(np.abs(W)))
     base_names = tuple(names[i] + ("'" if np.any(beta[k]) else "") for k, i in enumerate(independent))
     expr = tuple(_expression(i, dependent, beta[k], names) for k, i in enumerate(independent))
     return BaseParameters(independent=independent, dependent=dependent, beta=beta, matrix=B, names=base_names,
@@ -401,8 +409,8 @@ def default_reach(robot: SerialRobot) -> float:
     mass from its joint origin. At any configuration every link's joint origin and centre of mass are within
     this distance of any other joint origin along the chain (triangle inequality over the segments)."""
     model = robot.model
-    segments = sum(float(np.linalg.norm(model.jointPlacements[i].translation)) for i in range(1, model.njoints))
-    last = float(np.linalg.norm(model.inertias[model.njoints - 1].lever))
+    segments = sum(norm3(model.jointPlacements[i].translation) for i in range(1, model.njoints))
+    last = norm3(model.inertias[model.njoints - 1].lever)
     return segments + last
 
 # ---------------------------------------------------------------------------------------------- processing

@@ -85,6 +85,7 @@ from h4bench.ident.processing.weakform import (
     viscous_columns,
 )
 from h4bench.ident.processing.choice import kernel_family, stack_equations
+from h4bench.ident.robots.serial import norm3
 from h4bench.ident.robots.serial_steps import PARTS, inertial_family
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
@@ -109,9 +110,9 @@ def geometry_bounds(robot) -> dict:
         short = model.joints[i].shortname()
         if "Revolute" not in short and not short.startswith("JointModelR"):
             raise ValueError(f"robot must have revolute joints only for the certified equation, joint {i} is {short}")
-    R = sum(float(np.linalg.norm(model.jointPlacements[i].translation)) for i in range(1, model.njoints))
+    R = sum(norm3(model.jointPlacements[i].translation) for i in range(1, model.njoints))
     m_bar = float(up(1.0 + R * R))
-    g0 = float(np.linalg.norm(np.asarray(model.gravity.linear)))
+    g0 = norm3(model.gravity.linear)
     g_bar = float(up(g0 * math.sqrt(1.0 + R * R) * (1 + 1e-15)))
     return {"R": R, "M": m_bar, "dM": 2.0 * m_bar, "gamma": 3.0 * m_bar, "g": g_bar, "dg": 2.0 * g_bar}
 
