@@ -24,10 +24,11 @@ WARM_ROWS = True
 #: per-round widths and seconds on fewer and on all rows: benchmarks/bench_serial_certified.py prints them
 COARSE_GROUPS = 256
 #: HiGHS options of every round's hull LPs: the dual simplex. Each round starts from the previous round's bases
-#: with a new right-hand side and radius (the last box's chords), where the dual simplex took 14 % (UR5, 58
-#: parameters) and 19 % (Panda, 69) less time than the primal simplex of the point hulls (same boxes; one process,
-#: the logs of benchmarks/bench_serial_certified.py at 007d532); the point hulls keep the primal simplex, faster
-#: there (1.8 s against 3.2 s for the Panda's tuned hull)
+#: with a new right-hand side and radius (the last box's chords). On the logs of benchmarks/bench_serial_certified.py
+#: (hull alone, 2 processes, at 396da6f + the portable base) the dual simplex took 19.0 s against 22.2 s of the
+#: primal one (UR5) and 40.5 s against 40.6 s (Panda: 6 of its runs stopped at the iteration limit and were re-run
+#: cold, 0 of the primal's); one process at 007d532, 28.7 against 33.2 s and 53.4 against 65.6 s. The same boxes.
+#: The point hulls keep the primal simplex, faster there (1.8 s against 3.2 s for the Panda's tuned hull)
 SIGNED_SIMPLEX = {"simplex_strategy": 1}
 
 

@@ -119,7 +119,8 @@ class BaseParameters:
             raise ValueError(f"lower, upper must be (p,) = ({p},) with lower <= upper, got {lower.shape}, {upper.shape}")
         mid, rad = 0.5 * (lower + upper), 0.5 * (upper - lower)
         c, r = matmul(self.matrix, mid), matmul(np.abs(self.matrix), rad)
-        slack = 4.0 * p * np.finfo(float).eps * matmul(np.abs(self.matrix), np.maximum(np.abs(lower), np.abs(upper)))
+        big = np.maximum(np.abs(lower), np.abs(upper))
+        slack = 4.0 * p * np.finfo(float).eps * matmul(np.abs(self.matrix), big)
         return np.nextafter(c - r - slack, -np.inf), np.nextafter(c + r + slack, np.inf)
 
 

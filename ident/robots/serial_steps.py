@@ -32,7 +32,8 @@ from numpy.lib.stride_tricks import as_strided
 from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.processing.weakform import Kernel
 
-__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_family", "inertial_rows", "local_bounds", "q_remainder", "speed_linear"]
+__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_family", "inertial_rows", "local_bounds", "q_remainder",
+           "speed_linear"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
