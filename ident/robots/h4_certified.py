@@ -35,19 +35,14 @@ from h4bench.ident.processing.weakform import (NonlinearSteps, coulomb_columns, 
                                                torque_rows, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
-from h4bench.ident.numerics.interval import down, up
+from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
 from h4bench.ident.robots.h4_jets import box_jets, point_jets
 
-__all__ = ["CURVATURE_FACTOR", "MIN_KERNEL_STEPS", "MOTION_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps",
-           "MotionBounds", "Processing", "certified_equation", "certified_rows", "certified_steps", "curvature_bounds",
-           "motion_tubes", "nacelle_terms", "stated_assumptions"]
+__all__ = ["CURVATURE_FACTOR", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps", "MotionBounds", "Processing", "certified_equation",
+           "certified_rows", "certified_steps", "curvature_bounds", "nacelle_terms", "stated_assumptions"]
 
 CURVATURE_FACTOR = 2.0  # stated factor on the sampled second-derivative maxima (not proven; see module docstring)
-#: consecutive sample steps per motion tube (:func:`motion_tubes`): one set of interval jets bounds the second
-#: derivatives over all of them (the truncation's second-order remainder only), a quarter of the jets of one tube per
-#: step (benchmarks/bench_certified_stage.py: time and width, one tube per step against four)
-MOTION_STEPS = 4
 N_JOINTS = 4
 # What the derived equation states without proving it (module docstring), entry -> source
 STATED = {
@@ -97,23 +92,21 @@ class CertifiedEquation(IntervalEquation):
 
 @dataclass(frozen=True)
 class MotionBounds:
-    """The motion tubes of a log (one per :data:`MOTION_STEPS` consecutive steps, :func:`motion_tubes`) and the
-    bounds over each of the second derivatives of P and F: q_tube (T, 4) a Taylor model in tau [rad], v_tube (T, 4)
-    [rad/s] (:class:`~ident.numerics.jets.MR`), HP, HF (T, 4, 2, 8, 8) and the (T,) mask of the tubes whose bounds
-    the interval jets proved (the others hold sampled bounds); ``steps`` the steps per tube."""
+    """Each step's motion tube and the bounds over it of the second derivatives of P and F: q_tube (S, 4) a Taylor
+    model in tau [rad], v_tube (S, 4) [rad/s] (:class:`~ident.numerics.jets.MR`), HP, HF (S, 4, 2, 8, 8) and the
+    (S,) mask of the steps whose bounds the interval jets proved (the others hold sampled bounds)."""
 
     q_tube: MR
     v_tube: MR
     HP: np.ndarray
     HF: np.ndarray
     proven: np.ndarray
-    steps: int = 1
 
-    def covers(self, q_tube: MR, v_tube: MR, steps: int = 1) -> np.ndarray:
-        """(T,) True where the proven tube contains the given one, of as many steps (q_tube a Taylor model in the
-        same tau, v_tube a plain box, both (T, 4)), for every tau: ``|c1 - c2| + |a1 - a2| + r1 <= r2``
-        elementwise, its float sum rounded up; a bound over the bigger tube holds over every tube inside it."""
-        if q_tube.shape != self.q_tube.shape or steps != self.steps:
+    def covers(self, q_tube: MR, v_tube: MR) -> np.ndarray:
+        """(S,) True where the proven tube of this step contains the given one (q_tube a Taylor model in the same
+        tau, v_tube a plain box, both (S, 4)) for every tau: ``|c1 - c2| + |a1 - a2| + r1 <= r2`` elementwise,
+        its float sum rounded up; a bound over the bigger tube holds over every tube inside it."""
+        if q_tube.shape != self.q_tube.shape:
             return np.zeros(q_tube.shape[0], dtype=bool)
         grow = 1.0 + 8 * 2.0**-53
         dq = (np.abs(q_tube.c - self.q_tube.c) + np.abs(q_tube.a - self.q_tube.a) + q_tube.r) * grow + 1e-300
@@ -292,14 +285,14 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
     # the two evaluations; but over the tube the encoder's bounds are 2-5 times wider at 20000 counts per turn
     # (width/tuned 0.9641 -> 0.9717 on certified --quick seed 0) and 3 more parameters stay at the prior at 4096.)
     u = 2.0**-53
+    qddm = np.asarray(spec.qdd_max, dtype=float)
     em, ev = up(0.5 * (e[:-1] + e[1:])), up((e[:-1] + e[1:]) / h)
     vm = np.diff(q, axis=0) / h
     em_box, ev_box = up(em + 2 * u * np.abs(qm)), up(ev + 4 * u * np.abs(vm))
-    group = MOTION_STEPS if motion is None else motion.steps
-    q_tube, v_tube = motion_tubes(q, e, h, spec.qdd_max, group)
-    HPg, HFg, proven_g = _motion_jets(geometry, q_tube, v_tube, group, motion)
-    of_step = np.arange(qm.shape[0]) // group
-    HPm, HFm, proven_m = HPg[of_step], HFg[of_step], proven_g[of_step]
+    a_tube = vm * (h / 2)
+    q_tube = MR(qm, up(em_box + up(ev_box * (h / 2)) + up(qddm * (h * h / 8)) + 4 * u * np.abs(a_tube)), a_tube)
+    v_tube = MR(vm, up(ev_box + up(qddm * (h / 2))))
+    HPm, HFm, proven_m = _motion_jets(geometry, q_tube, v_tube, pose, motion)
     if np.any(e):
         GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, em_box), MR(vm, ev_box), pose)
     else:  # exact positions (the certificate's truth equation): no encoder term, nothing to bound
@@ -315,54 +308,22 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
         for got in (GP, GF):
             got[~proven] = np.inf
     nonlinear = nonlinear_steps(evaluate, q, e, h, spec.qd_max, spec.qdd_max, (HPm, HFm), encoder=(HP, HF, GP, GF))
-    bounds = MotionBounds(q_tube=q_tube, v_tube=v_tube, HP=HPm[::group], HF=HFm[::group], proven=proven_g,
-                          steps=group)
+    bounds = MotionBounds(q_tube=q_tube, v_tube=v_tube, HP=HPm, HF=HFm, proven=proven_m)
     return CertifiedSteps(q=q, e=e, spec=spec, nonlinear=nonlinear, proven=proven, proven_motion=proven_m,
                           motion=bounds)
 
 
-def motion_tubes(q, e, h: float, qdd_max, steps: int):
-    """The motion tubes of a log: one per ``steps`` consecutive sample steps (the last may hold fewer), holding
-    every true state of its steps and every point between such a state and its step's true secant state (the
-    midpoint and the mean speed of the step's true positions). q, e (n, 4) measured positions and their error
-    bounds [rad]. Returns (q_tube, v_tube), (T, 4) each:
-
-    * q: over a tube's n steps (samples i0 .. i1, time span n h) the true positions lie within ``qdd_max (n h)^2 /
-      8`` of their chord, whose ends are within e of the measured ones: ``c + a tau +- (e_i0 + e_i1 + qdd_max (n
-      h)^2 / 8)`` for tau in [-1, 1], c and a the measured chord's midpoint and half step (a Taylor model in tau;
-      the set is convex, so the steps' secant states and the points between lie in it too);
-    * qd: the hull over the tube's steps of each step's measured secant speed +- its encoder term and ``qdd_max h
-      / 2`` (every true speed of a step and its mean)."""
-    u = 2.0**-53
-    qddm = np.asarray(qdd_max, dtype=float)
-    S = q.shape[0] - 1
-    first = np.arange(0, S, steps)
-    last = np.minimum(first + steps, S)
-    span = ((last - first) * h)[:, None]
-    q0, q1 = q[first], q[last]
-    c, a = 0.5 * (q0 + q1), 0.5 * (q1 - q0)
-    rq = up(up(e[first] + e[last]) + up(qddm * up(span * span) / 8) + 4 * u * (np.abs(c) + np.abs(a)))
-    vm = np.diff(q, axis=0) / h
-    rv = up(up(up((e[:-1] + e[1:]) / h) + 4 * u * np.abs(vm)) + up(qddm * (h / 2)))
-    lo, hi = np.minimum.reduceat(down(vm - rv), first, axis=0), np.maximum.reduceat(up(vm + rv), first, axis=0)
-    return MR(c, rq, a), MR.from_bounds(down(lo), up(hi))
-
-
-def _motion_jets(geometry, q_tube: MR, v_tube: MR, steps: int, motion: MotionBounds | None):
-    """(HP, HF, proven) over the motion tubes (T, 4): ``motion``'s bounds on the tubes it covers, the interval jets
-    (:func:`ident.robots.h4_jets.box_jets`, around the forward kinematics of each tube's centre) on the others."""
-    from h4bench.sim.kinematics import forward_kinematics  # noqa: PLC0415
-
-    reuse = np.zeros(q_tube.shape[0], dtype=bool) if motion is None else motion.covers(q_tube, v_tube, steps)
+def _motion_jets(geometry, q_tube: MR, v_tube: MR, pose, motion: MotionBounds | None):
+    """(HP, HF, proven) over the motion tubes (S, 4): ``motion``'s bounds on the steps whose tubes it covers, the
+    interval jets (:func:`ident.robots.h4_jets.box_jets`) on the others."""
+    reuse = np.zeros(q_tube.shape[0], dtype=bool) if motion is None else motion.covers(q_tube, v_tube)
+    if not reuse.any():
+        _, HP, _, HF, proven = box_jets(geometry, q_tube, v_tube, pose)
+        return HP, HF, proven
+    HP, HF, proven = motion.HP.copy(), motion.HF.copy(), reuse.copy()
     todo = np.flatnonzero(~reuse)
-    if motion is None or not reuse.any():
-        HP = np.zeros((q_tube.shape[0], 4, 2, 8, 8))
-        HF, proven = np.zeros_like(HP), np.zeros(q_tube.shape[0], dtype=bool)
-    else:
-        HP, HF, proven = motion.HP.copy(), motion.HF.copy(), reuse.copy()
     if todo.size:
-        pose = np.atleast_2d(forward_kinematics(geometry, q_tube.c[todo]))
-        _, HP[todo], _, HF[todo], proven[todo] = box_jets(geometry, q_tube[todo], v_tube[todo], pose)
+        _, HP[todo], _, HF[todo], proven[todo] = box_jets(geometry, q_tube[todo], v_tube[todo], pose[todo])
     return HP, HF, proven
 
 
