@@ -126,7 +126,8 @@ def uncertain_hull(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9) -> Box:
 
 
 def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: HullWarm | None = None,
-                        split=None, lp_options: dict | None = None) -> tuple[Box, HullWarm | None]:
+                        split=None, lp_options: dict | None = None,
+                        lp_budget: dict | None = None) -> tuple[Box, HullWarm | None]:
     """Guaranteed box enclosing ``S = {theta in Q : exists W in [Wc - D, Wc + D], |y - W theta| <= bound}``.
 
     Wc : (m, p) centre regressor; D : (m, p) or scalar radius >= 0 (units of W); y : (m,); bound : scalar or
@@ -145,7 +146,8 @@ def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: H
     whatever it is. Returns ``(box, warm)``: the hull's own warm start (None when its LPs did not run through).
     split : a :class:`~ident.estimators.hull_split.HullSplit`: the minima and the maxima as two hulls (in two
     processes if it has them; ``warm`` is then its :class:`~ident.estimators.hull_split.SplitWarm`).
-    lp_options : HiGHS options of the hull's LP models (:func:`~ident.estimators.hull.interval_hull`).
+    lp_options, lp_budget : HiGHS options and per-run budgets of the hull's LP models
+    (:func:`~ident.estimators.hull.interval_hull`).
     """
     t0 = time.perf_counter()
     Wc, D, y = _check_interval_matrix(Wc, D, y)
@@ -194,9 +196,9 @@ def uncertain_hull_rows(Wc, D, y, bound, prior, *, lp_tol: float = 1e-9, warm: H
         rows = (A, BL, BU) if factor == 1.0 else stacked(b * factor)
         if split is not None:
             return split.hull(*rows, lo, hi, scale=rows_b * factor, center=start, lp_tol=lp_tol, warm=warm,
-                              lp_options=lp_options)
+                              lp_options=lp_options, lp_budget=lp_budget)
         return interval_hull(*rows, lo, hi, scale=rows_b * factor, center=start, lp_tol=lp_tol, warm=warm,
-                             lp_options=lp_options)
+                             lp_options=lp_options, lp_budget=lp_budget)
 
     def fallback(what):
         warnings.warn(f"uncertain_hull: {what}", LPFallbackWarning, stacklevel=4)

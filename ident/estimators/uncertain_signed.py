@@ -30,6 +30,11 @@ COARSE_GROUPS = 256
 #: cold, 0 of the primal's); one process at 007d532, 28.7 against 33.2 s and 53.4 against 65.6 s. The same boxes.
 #: The point hulls keep the primal simplex, faster there (1.8 s against 3.2 s for the Panda's tuned hull)
 SIGNED_SIMPLEX = {"simplex_strategy": 1}
+#: per-run budgets of the rounds' LP models: a warm-started run that has not converged in 1000 iterations is cut and
+#: run again cold (:class:`~ident.numerics.lp.LPModel`). On the Panda's hull (one process, at b05321f) the cold
+#: re-runs took 249-355 iterations, while 6 warm runs stalled at the 20 000-iteration limit (12.9 s) and 10 others
+#: took 2 221-15 272 (6.5 s) of the 2 230 optimal runs (median 29 iterations, 99th percentile 982)
+SIGNED_BUDGET = {"warm_iteration_limit": 1000}
 
 
 def coarse_step(n_groups: int) -> int:
@@ -130,7 +135,8 @@ def _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, grou
         extra = up(up(y2hi - y2lo) + up(pmatmul(D, np.abs(lo1))) * (1 + 4 * Wc.shape[1] * 2.0**-53))
         b2 = up(np.asarray(bound, dtype=float) + extra)
         sub, warm = uncertain_hull_rows(W1, D1, y2, b2, Box(np.zeros_like(lo1), width, names=names),
-                                        warm=warm if WARM_ROWS else None, split=split, lp_options=SIGNED_SIMPLEX)
+                                        warm=warm if WARM_ROWS else None, split=split, lp_options=SIGNED_SIMPLEX,
+                                        lp_budget=SIGNED_BUDGET)
         lo_f = np.nextafter(lo1 + sub.lower, -np.inf)
         hi_f = np.nextafter(lo1 + sub.upper, np.inf)
         new_lo = np.maximum(lo, np.where(flip, -hi_f, lo_f))

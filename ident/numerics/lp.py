@@ -245,7 +245,9 @@ class LPModel:
     midpoint of the box); col_scale : (n,) powers of two (default 1, see :meth:`scale_columns`);
     tolerance : primal/dual feasibility tolerance; iteration_limit, time_limit : the per-solve budgets of each
     HiGHS run (simplex iterations, seconds of wall time; None: the defaults of :meth:`budgets`, from the model's
-    size; ``math.inf``: none); dual_after_rows : a solve whose only change since the last one is added rows
+    size; ``math.inf``: none); warm_iteration_limit : a lower iteration limit for a solve's first run when it
+    starts from a valid basis (None: the same budget): a warm start that stalls is cut there and the solve runs
+    again cold, under the full budget; dual_after_rows : a solve whose only change since the last one is added rows
     runs the dual simplex (the previous basis stays dual feasible when rows are added, while the primal simplex
     restarts from an infeasible point); options : further HiGHS options (default ``presolve='off'``).
     Counters: ``solves`` (HiGHS runs), ``iterations``, ``limit_hits``, ``retries``, ``fallbacks`` (module
@@ -254,7 +256,7 @@ class LPModel:
 
     def __init__(self, xl, xu, *, center=None, col_scale=None, tolerance: float | None = 1e-9,
                  iteration_limit: float | None = None, time_limit: float | None = None,
-                 dual_after_rows: bool = False, **options) -> None:
+                 warm_iteration_limit: float | None = None, dual_after_rows: bool = False, **options) -> None:
         self.xl = np.asarray(xl, dtype=float)
         self.xu = np.asarray(xu, dtype=float)
         n = self.xl.size
@@ -264,10 +266,13 @@ class LPModel:
         self.center = 0.5 * self.xl + 0.5 * self.xu if center is None else np.asarray(center, dtype=float)
         self.d = np.ones(n) if col_scale is None else np.asarray(col_scale, dtype=float)
         self.r = np.zeros(0)  # the row factors, in insertion order
-        for name, value in (("iteration_limit", iteration_limit), ("time_limit", time_limit)):
+        for name, value in (("iteration_limit", iteration_limit), ("time_limit", time_limit),
+                            ("warm_iteration_limit", warm_iteration_limit)):
             if value is not None and (isinstance(value, bool) or not value > 0):
                 raise ValueError(f"{name} must be None or a number > 0, got {value!r}")
         self.iteration_limit, self.time_limit = iteration_limit, time_limit
+        self.warm_iteration_limit = warm_iteration_limit
+        self._has_basis = False  # whether HiGHS holds a basis to start from (a run's, or one set)
         self.dual_after_rows = bool(dual_after_rows)
         self.iterations = self.solves = self.limit_hits = self.retries = self.fallbacks = 0
         self._norm: float | None = None
@@ -365,6 +370,7 @@ class LPModel:
     def set_basis(self, basis) -> None:
         """Start the next solve from ``basis`` (a :meth:`basis` of a model of the same shape)."""
         check(self.highs.setBasis(basis), "setBasis")
+        self._has_basis = True
 
     def basis_status(self) -> tuple[list, list]:
         """HiGHS's current basis as ``(col_status, row_status)`` lists (for :meth:`set_basis_status`)."""
@@ -384,6 +390,7 @@ class LPModel:
         b.row_status = list(row_status) + [highspy.HighsBasisStatus.kBasic] * (self.m - len(row_status))
         b.valid = True
         ok = self.highs.setBasis(b) != _ERROR
+        self._has_basis = self._has_basis or ok
         self._cost_changed = True  # not a rows-only change
         return ok
 
@@ -400,12 +407,15 @@ class LPModel:
         self._norm = norm
         self._cost_changed = True
 
-    def _run(self, strategy: int | None = None):
-        """One ``run`` of HiGHS under the per-solve budgets (:meth:`budgets`, the time limit re-armed), with the
-        simplex strategy ``strategy`` for this run only (None: the model's). Returns (model status, simplex
-        iterations); LPError if ``run`` itself fails."""
+    def _run(self, strategy: int | None = None, warm: bool = False):
+        """One ``run`` of HiGHS under the per-solve budgets (:meth:`budgets`, the time limit re-armed; a ``warm``
+        run, from a valid basis, at most ``warm_iteration_limit`` iterations), with the simplex strategy
+        ``strategy`` for this run only (None: the model's). Returns (model status, simplex iterations); LPError if
+        ``run`` itself fails."""
         h = self.highs
         its, secs = self.budgets()
+        if warm and self.warm_iteration_limit is not None and self._has_basis:
+            its = int(min(its, self.warm_iteration_limit))
         check(h.setOptionValue("simplex_iteration_limit", its), f"option simplex_iteration_limit={its}")
         arm_time_limit(h, secs)
         switch = strategy is not None and strategy != self._strategy
@@ -417,6 +427,7 @@ class LPModel:
             if switch:
                 check(h.setOptionValue("simplex_strategy", self._strategy), f"option simplex_strategy={self._strategy}")
         self.solves += 1
+        self._has_basis = True
         check(run_status, "run")
         it = int(h.getInfo().simplex_iteration_count)
         self.iterations += it
@@ -443,10 +454,11 @@ class LPModel:
         norm = self._norm
         rows_only = self.dual_after_rows and self._rows_added and not self._cost_changed
         self._rows_added = self._cost_changed = False
-        ms, it = self._run(_DUAL_SIMPLEX if rows_only else None)
+        ms, it = self._run(_DUAL_SIMPLEX if rows_only else None, warm=True)
         if ms not in (_OPTIMAL, _INFEASIBLE):
             self.retries += 1
             h.clearSolver()
+            self._has_basis = False
             ms, it2 = self._run(_DUAL_SIMPLEX)
             it += it2
         if ms == _INFEASIBLE:
@@ -456,6 +468,7 @@ class LPModel:
             self.fallbacks += 1
             rd, valid = self._row_duals(sol)
             h.clearSolver()  # the next solve starts cold, not from the basis where this one stopped
+            self._has_basis = False
             return LPSolution("limit", duals=rd * self.r * norm, iterations=it, dual_valid=valid)
         if ms != _OPTIMAL or not sol.value_valid or len(sol.col_value) != self.n:
             raise LPError(f"HiGHS did not solve the LP: {h.modelStatusToString(ms)}")

@@ -201,6 +201,31 @@ def test_a_solve_stopped_at_its_iteration_limit_is_retried_cold_once_then_report
     assert (model.limit_hits, model.retries, model.fallbacks) == (2, 1, 1)
 
 
+def test_a_warm_run_is_cut_at_the_warm_limit_and_solved_again_cold():
+    """warm_iteration_limit: the first solve (no basis yet) has the full budget; a later solve starting from the
+    previous basis stops at the warm limit and is re-run cold under the full budget, reaching linprog's optimum;
+    a set basis counts as warm too; the value is checked."""
+    rng = np.random.default_rng(5)
+    A, lo, hi, xl, xu, x_star = _strips(rng, 400, 12)
+    model = LPModel(xl, xu, center=x_star, warm_iteration_limit=1)
+    model.add_rows(A, lo, hi)
+    span = xu - xl
+    for k, c in enumerate(rng.normal(size=(4, 12))):
+        ref = linprog(c, A_ub=np.vstack([A, -A]), b_ub=np.concatenate([hi, -lo]), bounds=list(zip(xl, xu)),
+                      method="highs")
+        sol = model.solve(c)
+        assert sol.status == "optimal" and c @ sol.x == pytest.approx(ref.fun, abs=1e-7 * np.abs(c) @ span)
+        if k == 0:  # cold: the full budget, no retry
+            assert model.counters()["lp_retries"] == 0 and sol.iterations > 1
+    assert model.retries == model.limit_hits == 3 and model.fallbacks == 0
+    fresh = LPModel(xl, xu, center=x_star, warm_iteration_limit=1)
+    fresh.add_rows(A, lo, hi)
+    fresh.set_basis(model.basis())
+    assert fresh.solve(rng.normal(size=12)).status == "optimal" and fresh.retries == 1
+    with pytest.raises(ValueError, match="warm_iteration_limit"):
+        LPModel(xl, xu, warm_iteration_limit=0)
+
+
 def test_the_time_limit_is_rearmed_for_every_run():
     """HiGHS's ``time_limit`` is compared with the run time of the whole ``Highs`` object (the control at the
     end); LPModel re-arms it per run, so solves keep succeeding long after the runs together used the budget."""
