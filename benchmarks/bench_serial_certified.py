@@ -47,6 +47,8 @@ UR5     2b4eace  43.6                 18.4          24.6      1630   0.0445     
 Panda   2b4eace  76.8                 29.2          46.9      2263   0.0435       1.23              69/69
 UR5     9493379  29.0                 10.0          18.2      1624   0.0470       1.15              58/58
 Panda   9493379  57.6                 16.7          39.9      2236   0.0384       1.12              69/69
+UR5     6308044  26.7                 10.0          15.8      1615   0.0470       1.15              58/58
+Panda   6308044  48.2                 16.2          31.0      2282   0.0384       1.12              69/69
 ======  =======  ===================  ============  ========  =====  ===========  ================  ========
 
 (LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio, the
@@ -61,7 +63,8 @@ machine: the family's kernels share one pass of the per-step stage, split betwee
 (the same rows as 2b4eace's, bit for bit); the hull's least-squares centre by Jacobi rotations in waves (it took 1.4 s
 per round for the Panda) and its rounds on the dual simplex (1 and 6 runs stopped at the iteration limit, re-run
 cold); and the base parameters by h4bench.portable instead of LAPACK: another choice among equal columns, so the
-widths are of other parameters and another prior. Tuned hulls 2.2 s and 3.1 s.) What changed: the q-q remainder of the
+widths are of other parameters and another prior. Tuned hulls 2.2 s and 3.1 s. At 6308044 a warm-started LP run is
+cut at 1000 simplex iterations and re-run cold (uncertain_signed.SIGNED_BUDGET: 5 and 25 such runs).) What changed: the q-q remainder of the
 Coriolis and gravity terms bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated
 exactly (1b54bd7), and the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069,
 6fc8ab8). At 6fc8ab8 the Panda's hull took 9 rounds (median width / prior after each: 0.711, 0.229, 0.110, 0.0619,
