@@ -7,7 +7,8 @@ stage; medians over the seeds. Wall and CPU time (a shared machine: compare rati
 certified box's width over the prior's, per parameter, and how many parameters stay at the prior
 (``--counts N`` simulates an encoder of N counts per turn instead of the scenario's 20000, e.g. 4096).
 
-    python benchmarks/bench_certified_stage.py [--full] [--seeds 0,1,2] [--counts 4096] [--out F.json]
+    python benchmarks/bench_certified_stage.py [--full] [--seeds 0,1,2] [--counts 4096] [--processes 1,2]
+        [--out F.json]
 
 Measured on a loaded 2-core machine (medians over seeds 0-2, quick), the code at 7b00d11 then at 621b7b6:
 (equation + certificate) / simulation 80.4 -> 55.3 (equation 13.3 -> 14.0 s, certificate 9.15 -> 1.56 s,
@@ -20,22 +21,25 @@ within the band of a reversal carry the sign interval). At 11c861b (box_jets in 
 (equation + certificate) / simulation 47.9 (equation 8.41 s, certificate 0.95 s, simulation 0.19 s), width/tuned
 median 1.08, 0 violations. Motion tubes over 2 or 3 steps (one set of jets each, tried at f011427) took 8.2 and 6.9 s
 for the equation but widened the box to 1.15 and 1.83 times the tuned hull (medians); 4-step tubes failed the pose
-test on 2880 of 4000 steps.
+test on 2880 of 4000 steps. At the commit that split the interval jets' chunks between 2 processes (the same bits;
+measured on another 2-core machine, idle, where the simulation stage is faster: 0.136 s): (equation + certificate) /
+simulation 79.9 with 1 process, 53.9 with 2 (equation 9.64 -> 6.10 s, certificate 1.25 -> 1.24 s: it reuses the
+measured equation's motion bounds), the ratio 1.5; width/tuned median 1.07, 0 violations.
 """
 
 import _setup  # noqa: F401  (repository root on sys.path, --threads)
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 
-def one(seed: int, quick: bool, counts: int = 0) -> dict:
-    from h4bench.scenarios.certificate import certify
-    from h4bench.scenarios.certified_verdict import AT_PRIOR
+def one(seed: int, quick: bool, counts: int = 0, processes=(1,)) -> list[dict]:
+    """One experiment, certified once per entry of ``processes`` (``H4BENCH_HULL_PROCESSES``)."""
     from h4bench.scenarios.experiment import run_experiment
     from h4bench.scenarios.registry import load_spec
 
@@ -43,6 +47,17 @@ def one(seed: int, quick: bool, counts: int = 0) -> dict:
     if counts:
         spec["encoder"]["counts_per_turn"] = counts
     run_ = run_experiment(spec, seed)
+    out = []
+    for p in processes:
+        os.environ["H4BENCH_HULL_PROCESSES"] = str(p)
+        out.append(dict(_certified(run_, spec, seed), processes=p))
+    return out
+
+
+def _certified(run_, spec: dict, seed: int) -> dict:
+    from h4bench.scenarios.certificate import certify
+    from h4bench.scenarios.certified_verdict import AT_PRIOR
+
     t0, c0 = time.perf_counter(), time.process_time()
     extra = certify(run_, spec)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -65,22 +80,35 @@ def main() -> None:
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--counts", type=int, default=0, help="encoder counts per turn (0: the scenario's)")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--processes", default="1,2",
+                    help="the certified stage's processes (H4BENCH_HULL_PROCESSES), each measured on every seed")
     ap.add_argument("--threads", default=None)
     a = ap.parse_args()
+    procs = [int(x) for x in a.processes.split(",")]
     rows = []
     for s in (int(x) for x in a.seeds.split(",")):
-        r = one(s, not a.full, a.counts)
-        rows.append(r)
-        print(f"seed {s}: simulation {r['simulation']:.2f} s, equation {r['equation']:.2f} s, box {r['box']:.2f} s, "
-              f"certificate {r['certificate']:.2f} s; (equation + certificate) / simulation "
-              f"{r['equation_and_certificate_over_simulation']:.1f}; width/tuned {r['width_vs_tuned_geomean']:.4f}, "
-              f"violations {r['violations']}; {r['at_prior']} of 14 at the prior, width/prior "
-              + " ".join(f"{w:.4g}" for w in r["width_over_prior"]), flush=True)
-    med = {k: float(np.median([r[k] for r in rows])) for k in rows[0] if k not in ("seed", "width_over_prior")}
-    print("median: " + ", ".join(f"{k} {v:.3g}" for k, v in med.items()))
+        for r in one(s, not a.full, a.counts, procs):
+            rows.append(r)
+            _print(r)
+    for p in procs:
+        mine = [r for r in rows if r["processes"] == p]
+        med = {k: float(np.median([r[k] for r in mine])) for k in mine[0] if k not in ("seed", "width_over_prior")}
+        print(f"median, {p} process(es): " + ", ".join(f"{k} {v:.3g}" for k, v in med.items()))
+    if len(procs) > 1:
+        ratio = [r1["equation_and_certificate_over_simulation"] / r2["equation_and_certificate_over_simulation"]
+                 for r1, r2 in zip(rows[::len(procs)], rows[len(procs) - 1::len(procs)])]
+        print(f"(equation + certificate) with {procs[0]} over {procs[-1]} process(es), median over the seeds: "
+              f"{float(np.median(ratio)):.3g}")
     if a.out:
-        Path(a.out).write_text(json.dumps({"rows": rows, "median": med, "quick": not a.full, "counts": a.counts},
-                                          indent=1))
+        Path(a.out).write_text(json.dumps({"rows": rows, "quick": not a.full, "counts": a.counts}, indent=1))
+
+
+def _print(r: dict) -> None:
+    print(f"seed {r['seed']}, {r['processes']} process(es): simulation {r['simulation']:.2f} s, equation "
+          f"{r['equation']:.2f} s, box {r['box']:.2f} s, certificate {r['certificate']:.2f} s; (equation + "
+          f"certificate) / simulation {r['equation_and_certificate_over_simulation']:.1f}; width/tuned "
+          f"{r['width_vs_tuned_geomean']:.4f}, violations {r['violations']}; {r['at_prior']} of 14 at the prior, "
+          "width/prior " + " ".join(f"{w:.4g}" for w in r["width_over_prior"]), flush=True)
 
 
 if __name__ == "__main__":

@@ -157,7 +157,8 @@ def _watch_parent(parent: int) -> None:
 
 def _worker_init(parent: int) -> None:
     """In each worker: die with the campaign process (never an orphan), ignore SIGINT (the parent decides), one
-    BLAS thread (:mod:`scenarios.threads`: the pool has a worker per core; set last, after the signals)."""
+    BLAS thread and no process of its own for the certified path's halves (:mod:`scenarios.threads`: the pool has
+    a worker per core; set last, after the signals)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the campaign's handler (inherited through fork)
     if sys.platform.startswith("linux"):
@@ -170,6 +171,7 @@ def _worker_init(parent: int) -> None:
         os._exit(3)
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
     single_blas_thread()
+    os.environ.setdefault("H4BENCH_HULL_PROCESSES", "1")  # a worker per core: no process of its own beside it
 
 
 def _executor(camp: dict):

@@ -34,6 +34,7 @@ from h4bench.ident.robots.h4_certified import Processing, certified_equation, st
 from h4bench.scenarios import judging
 from h4bench.scenarios.certified_verdict import H4_HINTS, prior_diagnosis, row_radius_summary
 from h4bench.scenarios.spec import ScenarioError
+from h4bench.scenarios.threads import hull_processes
 
 __all__ = ["assumption_failures", "certify", "check_certificate", "processing_of", "simulated_error_spec",
            "verdict_lines"]
@@ -60,7 +61,7 @@ def check_certificate(geometry, ceq, truth, tau_logged, error_spec, processing, 
     # measured log's motion tubes hold every true state of their steps, so their second-derivative bounds serve
     # every step whose exact tube they are checked to contain (the jets compute the others)
     exact = certified_equation(geometry, truth.q, truth.tau_applied, error_spec, processing, position_error=0.0,
-                               motion=ceq.motion)
+                               motion=ceq.motion, processes=hull_processes())
     t = ceq.terms
     checks = {
         "torque": _check(exact.y - ceq.y, t["torque"]),
@@ -200,7 +201,8 @@ def certify(run_, spec: dict) -> dict:
                                       model=run_.model)
     processing = processing_of(spec)
     t0 = time.perf_counter()
-    ceq = certified_equation(run_.geometry, run_.dataset.q, run_.dataset.tau, error_spec, processing)
+    ceq = certified_equation(run_.geometry, run_.dataset.q, run_.dataset.tau, error_spec, processing,
+                             processes=hull_processes())
     t_eq = time.perf_counter() - t0
     outcomes, _ = judging.run_methods(["certified"], ceq.Wc, ceq.y, ceq.bound, run_.prior,
                                       {"regressor_radius": ceq.D, "groups": ceq.joint.astype(np.int64)})

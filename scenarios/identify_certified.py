@@ -27,6 +27,7 @@ from h4bench.ident.robots.h4_certified import Processing, certified_equation, st
 from h4bench.scenarios import judging
 from h4bench.scenarios.certified_verdict import H4_HINTS, contradicted_entry, prior_diagnosis, row_radius_summary
 from h4bench.scenarios.rundir import RUNS_DIR, OwnedFolder, check_target, write_json
+from h4bench.scenarios.threads import hull_processes
 
 __all__ = ["identify_certified_csv", "read_processing"]
 
@@ -110,7 +111,8 @@ def identify_certified_csv(path, spec_path, prior=(0.0, 2.0), model=None, out=No
         return _write(out, result)
     geometry = sim.H4Geometry.from_model(sim.load_model(model))
     try:
-        ceq = certified_equation(geometry, dataset.q, dataset.tau, error_spec, processing)
+        ceq = certified_equation(geometry, dataset.q, dataset.tau, error_spec, processing,
+                                 processes=hull_processes())
     except ValueError as exc:
         raise OptionError(f"CSV {str(path)!r} with --spec {spec_path}: {exc}") from None
     outcomes, _ = judging.run_methods(["certified"], ceq.Wc, ceq.y, ceq.bound, box_prior,

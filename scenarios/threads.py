@@ -51,10 +51,11 @@ def original_blas_threads():
 
 def hull_processes() -> int:
     """The processes of the certified path's two halves: a signed hull's minima and maxima
-    (:mod:`ident.estimators.hull_split`) and the two halves of a serial certified equation's windows
+    (:mod:`ident.estimators.hull_split`), the two halves of a serial certified equation's windows
     (:func:`ident.robots.serial_certified.certified_family`, the TX40 study's identification and held-out
-    equations); speed only: 1 and 2 give the same box.
-    ``H4BENCH_HULL_PROCESSES`` (1 or 2) if set, else 2 when this process may use 2 cores or more."""
+    equations) and of the H4's interval jets (:func:`ident.robots.h4_certified.certified_steps`); speed only: 1 and
+    2 give the same box. ``H4BENCH_HULL_PROCESSES`` (1 or 2) if set, else 2 when this process may use 2 cores or
+    more. A campaign's workers (one per core already) set it to 1 unless it is set."""
     import os
 
     env = os.environ.get("H4BENCH_HULL_PROCESSES")

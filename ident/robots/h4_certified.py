@@ -37,7 +37,7 @@ from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
 from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
-from h4bench.ident.robots.h4_jets import box_jets, point_jets
+from h4bench.ident.robots.h4_jets import box_jets_started, point_jets
 
 __all__ = ["CURVATURE_FACTOR", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps", "MotionBounds", "Processing", "certified_equation",
            "certified_rows", "certified_steps", "curvature_bounds", "nacelle_terms", "stated_assumptions"]
@@ -194,7 +194,8 @@ def curvature_bounds(geometry, q, h: float, every: int = 10, factor: float = CUR
 
 
 def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing | None = None,
-                       position_error=None, motion: MotionBounds | None = None) -> CertifiedEquation:
+                       position_error=None, motion: MotionBounds | None = None,
+                       processes: int = 1) -> CertifiedEquation:
     """The H4's derived interval equation of a log: q (n, 4) measured positions [rad], tau (n, 4) logged torques
     [N m] (held over each step, or the torque at each sample instant: ``spec.torque_timing``), spec the error
     specification (4 joints).
@@ -208,6 +209,8 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     motion : the :class:`MotionBounds` of another equation of the same steps (e.g. the measured log's,
     ``CertifiedEquation.motion``): its proven bounds serve every step whose motion tube lies inside that
     equation's (checked step by step, :meth:`MotionBounds.covers`), the interval jets the others.
+    processes : 1, or 2: the later half of the steps' interval jets in a worker process (:func:`certified_steps`;
+    the same bits).
     """
     processing = processing or Processing()
     q = np.asarray(q, dtype=float)
@@ -220,7 +223,7 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
         pairs = list(zip(family.steps, family.strides))
     else:
         pairs = [(int(processing.kernel_steps), processing.stride)]
-    steps = certified_steps(geometry, q, spec, processing, position_error, motion)
+    steps = certified_steps(geometry, q, spec, processing, position_error, motion, processes=processes)
     eqs = [certified_rows(steps, make_kernel(L, h, processing.kernel_shape), row_windows(q.shape[0], L, st), tau)
            for L, st in pairs]
     if len(eqs) == 1:
@@ -255,11 +258,30 @@ class CertifiedSteps:
 
 
 def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, position_error=None,
-                    motion: MotionBounds | None = None) -> CertifiedSteps:
+                    motion: MotionBounds | None = None, processes: int = 1) -> CertifiedSteps:
     """Everything of the certified equation that does not depend on the kernel: the position error bounds, the
     interval jets of every step's encoder box and motion tube (or the sampled fallback; ``motion``: bounds over
     containing tubes, :func:`certified_equation`), and the nonlinear columns' per-step stage
-    (:func:`ident.processing.weakform.nonlinear_steps`). q (n, 4) [rad]."""
+    (:func:`ident.processing.weakform.nonlinear_steps`). q (n, 4) [rad].
+
+    processes : 1, or 2: the later half of the interval jets' chunks (encoder boxes and motion tubes) runs in a
+    ``forkserver`` worker while this process computes the first half and the rest
+    (:func:`ident.robots.h4_jets.box_jets_started`): each chunk's numbers are its own, so the bits are the same."""
+    if processes not in (1, 2):
+        raise ValueError(f"processes must be 1 or 2, got {processes!r}")
+    if processes == 1:
+        return _certified_steps(geometry, q, spec, processing, position_error, motion, None)
+    import concurrent.futures  # noqa: PLC0415
+    import multiprocessing  # noqa: PLC0415
+
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
+    try:
+        return _certified_steps(geometry, q, spec, processing, position_error, motion, pool)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, position_error, motion, pool):
     from h4bench.sim.kinematics import forward_kinematics  # noqa: PLC0415
 
     if spec.n_joints != N_JOINTS:
@@ -292,9 +314,11 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
     a_tube = vm * (h / 2)
     q_tube = MR(qm, up(em_box + up(ev_box * (h / 2)) + up(qddm * (h * h / 8)) + 4 * u * np.abs(a_tube)), a_tube)
     v_tube = MR(vm, up(ev_box + up(qddm * (h / 2))))
-    HPm, HFm, proven_m = _motion_jets(geometry, q_tube, v_tube, pose, motion)
-    if np.any(e):
-        GP, HP, GF, HF, proven = box_jets(geometry, MR(qm, em_box), MR(vm, ev_box), pose)
+    motion_done = _motion_jets(geometry, q_tube, v_tube, pose, motion, pool)
+    encoder_done = box_jets_started(geometry, MR(qm, em_box), MR(vm, ev_box), pose, pool) if np.any(e) else None
+    HPm, HFm, proven_m = motion_done()
+    if encoder_done is not None:
+        GP, HP, GF, HF, proven = encoder_done()
     else:  # exact positions (the certificate's truth equation): no encoder term, nothing to bound
         GP, GF = np.full((qm.shape[0], 4, 2, 8), np.inf), np.full((qm.shape[0], 4, 2, 8), np.inf)
         HP, HF = np.zeros((qm.shape[0], 4, 2, 8, 8)), np.zeros((qm.shape[0], 4, 2, 8, 8))
@@ -313,18 +337,29 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
                           motion=bounds)
 
 
-def _motion_jets(geometry, q_tube: MR, v_tube: MR, pose, motion: MotionBounds | None):
-    """(HP, HF, proven) over the motion tubes (S, 4): ``motion``'s bounds on the steps whose tubes it covers, the
-    interval jets (:func:`ident.robots.h4_jets.box_jets`) on the others."""
+def _motion_jets(geometry, q_tube: MR, v_tube: MR, pose, motion: MotionBounds | None, pool=None):
+    """A function returning (HP, HF, proven) over the motion tubes (S, 4): ``motion``'s bounds on the steps whose
+    tubes it covers, the interval jets (:func:`ident.robots.h4_jets.box_jets`) on the others, the later half of
+    their chunks begun in ``pool`` now (:func:`ident.robots.h4_jets.box_jets_started`)."""
     reuse = np.zeros(q_tube.shape[0], dtype=bool) if motion is None else motion.covers(q_tube, v_tube)
     if not reuse.any():
-        _, HP, _, HF, proven = box_jets(geometry, q_tube, v_tube, pose)
-        return HP, HF, proven
-    HP, HF, proven = motion.HP.copy(), motion.HF.copy(), reuse.copy()
+        started = box_jets_started(geometry, q_tube, v_tube, pose, pool)
+
+        def whole():
+            _, HP, _, HF, proven = started()
+            return HP, HF, proven
+
+        return whole
     todo = np.flatnonzero(~reuse)
-    if todo.size:
-        _, HP[todo], _, HF[todo], proven[todo] = box_jets(geometry, q_tube[todo], v_tube[todo], pose[todo])
-    return HP, HF, proven
+    started = box_jets_started(geometry, q_tube[todo], v_tube[todo], pose[todo], pool) if todo.size else None
+
+    def merged():
+        HP, HF, proven = motion.HP.copy(), motion.HF.copy(), reuse.copy()
+        if started is not None:
+            _, HP[todo], _, HF[todo], proven[todo] = started()
+        return HP, HF, proven
+
+    return merged
 
 
 def _torque_side_bound(spec: ErrorSpec, l1: float):

@@ -33,7 +33,7 @@ import numpy as np
 from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse, narrower
 
-__all__ = ["KrawczykFailure", "box_jets", "nacelle_jets", "point_jets", "pose_box"]
+__all__ = ["KrawczykFailure", "box_jets", "box_jets_started", "nacelle_jets", "point_jets", "pose_box"]
 
 N_JOINTS = 4
 _KRAWCZYK_TRIES = 6
@@ -288,14 +288,16 @@ def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk
     return tuple(Jet(join([p[k].v for p in parts]), join([p[k].g for p in parts])) for k in (0, 1))
 
 
-def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int = BOX_CHUNK):
-    """Bounds over the boxes Q, V (S, 4) of |gradient| and |Hessian| of P and F (second-order jets, chunked).
+def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int | None = None):
+    """Bounds over the boxes Q, V (S, 4) of |gradient| and |Hessian| of P and F (second-order jets in chunks of
+    ``chunk`` steps, default :data:`BOX_CHUNK`).
 
     Q may be a Taylor model in tau (a tube along each step's motion, :class:`~ident.numerics.jets.MR`).
     Returns (GP, HP, GF, HF, proven): GP, GF (S, 4, 2, 8) and HP, HF (S, 4, 2, 8, 8) magnitudes over the whole
     box (every tau), and a (S,) bool mask of the steps whose boxes were verified (the bounds of the others are NaN:
     the caller must not use them; a pose test or an interval inverse failed there, e.g. near a singular pose or
     for too wide a box)."""
+    chunk = BOX_CHUNK if chunk is None else int(chunk)
     S = Q.shape[0]
     out = [np.full((S, 4, 2, 8), np.nan), np.full((S, 4, 2, 8, 8), np.nan), np.full((S, 4, 2, 8), np.nan),
            np.full((S, 4, 2, 8, 8), np.nan)]
@@ -314,3 +316,22 @@ def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int = BOX_CHUNK):
             out[k][a:b] = m.mag()
         proven[a:b] = True
     return (*out, proven)
+
+
+def box_jets_started(geometry, Q: MR, V: MR, x_hat: np.ndarray, pool=None):
+    """:func:`box_jets` begun: with ``pool`` (a ``concurrent.futures`` executor of another process) the later half
+    of the chunks is submitted to it at once; the returned function computes the rest here and joins, the same
+    bits as :func:`box_jets` (the halves meet at a chunk boundary, so every chunk holds the same steps). Without a
+    pool, or with one chunk, the returned function computes it all."""
+    chunk = BOX_CHUNK
+    n_chunks = -(-Q.shape[0] // chunk)
+    if pool is None or n_chunks < 2:
+        return lambda: box_jets(geometry, Q, V, x_hat, chunk)
+    cut = (n_chunks // 2) * chunk  # the worker takes the later ceil(n / 2) chunks (the caller has more to do)
+    later = pool.submit(box_jets, geometry, Q[cut:], V[cut:], x_hat[cut:], chunk)
+
+    def finish():
+        first = box_jets(geometry, Q[:cut], V[:cut], x_hat[:cut], chunk)
+        return tuple(np.concatenate([a, b]) for a, b in zip(first, later.result()))
+
+    return finish

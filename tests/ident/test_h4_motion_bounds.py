@@ -85,3 +85,34 @@ def test_exact_equation_reuses_bounds_that_hold_inside_its_own_tubes(geometry):
                               motion=measured.motion)
     assert not measured.motion.covers(shifted.motion.q_tube, shifted.motion.v_tube).any()
     assert shifted.proven_motion.all()
+
+
+def test_two_processes_give_the_same_bits(geometry, monkeypatch):
+    """certified_equation(processes=2): the later half of the interval jets' chunks in a worker process, for the
+    measured log and for the exact one reusing its bounds on part of the steps; every array equal bit for bit."""
+    from h4bench.ident.robots import h4_jets
+    from h4bench.ident.robots.h4_certified import certified_equation
+
+    monkeypatch.setattr(h4_jets, "BOX_CHUNK", 16)  # 60 steps: 4 chunks, 2 in each process
+    q_true, q_meas, res = _log(geometry)
+    spec = _spec(res, q_true)
+    rng = np.random.default_rng(5)
+    tau = rng.normal(size=q_meas.shape)
+    processing = Processing(kernel_steps=40)
+    for_one = certified_equation(geometry, q_meas, tau, spec, processing, processes=1)
+    for_two = certified_equation(geometry, q_meas, tau, spec, processing, processes=2)
+    shifted = q_true.copy()
+    shifted[30:] += 10 * res  # the later steps' tubes leave the measured ones: the jets run on part of the steps
+    own = certified_equation(geometry, shifted, tau, spec, processing, position_error=0.0).motion
+    assert 0 < int(for_one.motion.covers(own.q_tube, own.v_tube).sum()) < 60
+    exact = [certified_equation(geometry, shifted, tau, spec, processing, position_error=0.0,
+                                motion=for_one.motion, processes=p) for p in (1, 2)]
+    for a, b in ((for_one, for_two), tuple(exact)):
+        for name in ("Wc", "D", "y", "bound"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        for name in ("HP", "HF", "proven"):
+            np.testing.assert_array_equal(getattr(a.motion, name), getattr(b.motion, name))
+        for k in a.terms:
+            np.testing.assert_array_equal(a.terms[k], b.terms[k])
+    with pytest.raises(ValueError, match="processes must be 1 or 2"):
+        certified_equation(geometry, q_meas, tau, spec, processing, processes=3)
