@@ -21,7 +21,7 @@ within the band of a reversal carry the sign interval). At 11c861b (box_jets in 
 (equation + certificate) / simulation 47.9 (equation 8.41 s, certificate 0.95 s, simulation 0.19 s), width/tuned
 median 1.08, 0 violations. Motion tubes over 2 or 3 steps (one set of jets each, tried at f011427) took 8.2 and 6.9 s
 for the equation but widened the box to 1.15 and 1.83 times the tuned hull (medians); 4-step tubes failed the pose
-test on 2880 of 4000 steps. At the commit that split the interval jets' chunks between 2 processes (the same bits;
+test on 2880 of 4000 steps. At cc74303, which split the interval jets' chunks between 2 processes (the same bits;
 measured on another 2-core machine, idle, where the simulation stage is faster: 0.136 s): (equation + certificate) /
 simulation 79.9 with 1 process, 53.9 with 2 (equation 9.64 -> 6.10 s, certificate 1.25 -> 1.24 s: it reuses the
 measured equation's motion bounds), the ratio 1.5; width/tuned median 1.07, 0 violations.
