@@ -30,6 +30,7 @@ import numpy as np
 
 from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.processing.motion_check import check_motion_bounds
+from h4bench.ident.processing.weakform import row_check
 from h4bench.ident.robots.h4_certified import Processing, certified_equation, stated_assumptions
 from h4bench.scenarios import judging
 from h4bench.scenarios.certified_verdict import H4_HINTS, prior_diagnosis, row_radius_summary
@@ -40,14 +41,6 @@ __all__ = ["assumption_failures", "certify", "check_certificate", "processing_of
            "verdict_lines"]
 
 _COLUMN_CHECKED = slice(0, 10)  # Imot1-4, Mnac, Ibc, Fv1-4
-
-
-def _check(actual, radius) -> dict:
-    actual, radius = np.abs(np.asarray(actual, dtype=float)), np.asarray(radius, dtype=float)
-    margin = radius - actual
-    return {"violations": int(np.sum(margin < 0)), "min_margin": float(margin.min()),
-            "max_actual": float(actual.max()), "max_radius": float(radius.max()),
-            "max_actual_over_radius": float(np.max(actual / np.maximum(radius, 1e-300)))}
 
 
 def check_certificate(geometry, ceq, truth, tau_logged, error_spec, processing, theta_true) -> dict:
@@ -64,12 +57,12 @@ def check_certificate(geometry, ceq, truth, tau_logged, error_spec, processing, 
                                motion=ceq.motion, processes=hull_processes())
     t = ceq.terms
     checks = {
-        "torque": _check(exact.y - ceq.y, t["torque"]),
-        "measurement": _check((ceq.Wc - exact.Wc)[:, _COLUMN_CHECKED],
+        "torque": row_check(exact.y - ceq.y, t["torque"]),
+        "measurement": row_check((ceq.Wc - exact.Wc)[:, _COLUMN_CHECKED],
                               (t["measurement"] + t["second_order"])[:, _COLUMN_CHECKED]),
-        "motion": _check(exact.y - exact.Wc @ th, (exact.terms["truncation"] + exact.terms["sign"]) @ th
+        "motion": row_check(exact.y - exact.Wc @ th, (exact.terms["truncation"] + exact.terms["sign"]) @ th
                          + exact.terms["model"] + exact.terms["rounding"]),
-        "total": _check(ceq.y - ceq.Wc @ th, ceq.bound + ceq.D @ th),
+        "total": row_check(ceq.y - ceq.Wc @ th, ceq.bound + ceq.D @ th),
     }
     radii = {"torque": t["torque"], "model": t["model"], "rounding": t["rounding"],
              **{k: t[k] @ th for k in ("measurement", "second_order", "truncation", "sign")}}

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["KernelFamily", "LONGEST_S", "MIN_KERNEL_STEPS", "SHORTEST_S", "STRIDE_DIVISOR", "check_kernel_steps",
-           "kernel_family", "stack_equations"]
+           "kernel_family", "stack_equations", "stack_family"]
 
 # The shortest kernel [sample steps]. The encoder error enters every acceleration column through the kernel's slope
 # (summation by parts): about 8 pi e / (L h)^2 per unit parameter for a Hann kernel of L steps, and the nacelle
@@ -120,3 +120,16 @@ def stack_equations(eqs: list, info: dict):
         else:
             out[f.name] = v
     return type(first)(**out)
+
+
+def stack_family(eqs: list, family: KernelFamily, **info):
+    """The equations of a family's kernels (one each, in the family's order) as one (:func:`stack_equations`):
+    ``info`` from the first equation's with ``rows`` and ``windows`` summed, ``kernels`` the family's
+    (:meth:`KernelFamily.to_dict`) and the given entries (what no longer holds for the whole, e.g. one kernel's
+    length, set to None). One kernel: that equation, with ``kernels`` added. Both robot kinds' paths use it."""
+    if len(eqs) == 1:
+        eqs[0].info["kernels"] = family.to_dict()
+        return eqs[0]
+    merged = dict(eqs[0].info, rows=sum(e.info["rows"] for e in eqs), windows=sum(e.info["windows"] for e in eqs),
+                  kernels=family.to_dict(), **info)
+    return stack_equations(eqs, merged)

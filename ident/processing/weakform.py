@@ -33,7 +33,7 @@ from h4bench.ident.numerics.interval import dot_error, down, up
 
 __all__ = ["KERNEL_SHAPES", "Kernel", "NonlinearSteps", "RowWindows", "coulomb_columns", "make_kernel",
            "nonlinear_columns", "nonlinear_rows", "nonlinear_steps",
-           "imot_columns", "row_windows", "torque_rows", "viscous_columns"]
+           "imot_columns", "row_check", "row_windows", "torque_rows", "torque_side_terms", "viscous_columns"]
 
 KERNEL_SHAPES = ("hann", "triangle")
 
@@ -152,6 +152,37 @@ def torque_rows(tau: np.ndarray, windows: RowWindows, kernel: Kernel, timing: st
     fp = dot_error(np.einsum("u,ruj->rj", np.abs(c), np.abs(taus)), kernel.steps + 1)
     # c's own rounding (4 operations per weight) is absorbed by the factor's relative margin
     return y, fp, float(up(np.sum(np.abs(c)) * (1 + (8 * kernel.steps + 32) * 2.0**-53)))
+
+
+def torque_side_terms(spec, l1: float) -> dict:
+    """The torque side's bound of every row of one kernel, by origin, per joint (n_j,) [N m], each rounded up:
+    ``torque`` the stated torque error ``torque_error l1``; ``timing`` the applied torque's change over the
+    ``latency`` and, for sample-instant torques, its deviation from the samples' interpolation (``torque_rate
+    (latency + h / 2) l1``, :func:`torque_rows`; 0 without a ``torque_rate``, where the spec's own check allows no
+    latency); ``model`` the stated ``model_error l1``. spec : an :class:`~ident.processing.errorspec.ErrorSpec`; l1
+    : the rounded-up ``sum |c|`` that :func:`torque_rows` returns."""
+    nj = spec.n_joints
+    rate = np.zeros(nj) if spec.torque_rate is None else np.asarray(spec.torque_rate, dtype=float)
+    span = spec.latency + (spec.sample_period / 2 if spec.torque_timing == "sample" else 0.0)
+
+    def product(a, b):  # a b >= 0 rounded up; exactly 0 where a factor is 0 (no stray tiny radius in reports)
+        a = np.asarray(a, dtype=float) * np.ones(nj)
+        return np.where((a == 0) | (b == 0), 0.0, up(a * b))
+
+    return {"torque": product(spec.torque_error, l1),
+            "timing": product(product(rate, float(up(span)) if span else 0.0), l1),
+            "model": product(spec.model_error, l1)}
+
+
+def row_check(actual, radius) -> dict:
+    """A certificate's check of derived radii against actual errors (a simulation's truth), elementwise:
+    ``violations`` (``|actual| > radius``), ``min_margin`` (the smallest ``radius - |actual|``), ``max_actual``,
+    ``max_radius`` and ``max_actual_over_radius``; JSON-ready. Both robot kinds' certificates use it."""
+    actual, radius = np.abs(np.asarray(actual, dtype=float)), np.asarray(radius, dtype=float)
+    margin = radius - actual
+    return {"violations": int(np.sum(margin < 0)), "min_margin": float(margin.min()),
+            "max_actual": float(actual.max()), "max_radius": float(radius.max()),
+            "max_actual_over_radius": float(np.max(actual / np.maximum(radius, 1e-300)))}
 
 
 def _secant(q: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:

@@ -29,10 +29,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.processing.errorspec import ErrorSpec
-from h4bench.ident.processing.choice import MIN_KERNEL_STEPS, check_kernel_steps, kernel_family, stack_equations
+from h4bench.ident.processing.choice import MIN_KERNEL_STEPS, check_kernel_steps, kernel_family, stack_family
 from h4bench.ident.processing.weakform import (NonlinearSteps, coulomb_columns, imot_columns,
                                                make_kernel, nonlinear_rows, nonlinear_steps, row_windows,
-                                               torque_rows, viscous_columns)
+                                               torque_rows, torque_side_terms, viscous_columns)
 from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
 from h4bench.ident.numerics.interval import up
@@ -226,16 +226,10 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     steps = certified_steps(geometry, q, spec, processing, position_error, motion, processes=processes)
     eqs = [certified_rows(steps, make_kernel(L, h, processing.kernel_shape), row_windows(q.shape[0], L, st), tau)
            for L, st in pairs]
-    if len(eqs) == 1:
-        eq = eqs[0]
-    else:
-        info = dict(eqs[0].info, kernel_steps=None, rows=sum(e.info["rows"] for e in eqs),
-                    windows=sum(e.info["windows"] for e in eqs), kernel_l1=max(e.info["kernel_l1"] for e in eqs))
-        eq = stack_equations(eqs, info)
+    eq = eqs[0] if processing.kernel_steps is not None else stack_family(
+        eqs, family, kernel_steps=None, kernel_l1=max(e.info["kernel_l1"] for e in eqs))
     eq.info.update(kernel_shape=processing.kernel_shape, stride=processing.stride,
                    curvature_every=processing.curvature_every)
-    if processing.kernel_steps is None:
-        eq.info["kernels"] = family.to_dict()
     if len(eq) <= len(PARAMETER_NAMES):
         raise ValueError(f"the log gives {len(eq)} rows ({eq.info['windows']} kernel windows, 4 joints), which must "
                          f"exceed the {len(PARAMETER_NAMES)} parameters: a longer log or a smaller stride")
@@ -362,16 +356,6 @@ def _motion_jets(geometry, q_tube: MR, v_tube: MR, pose, motion: MotionBounds | 
     return merged
 
 
-def _torque_side_bound(spec: ErrorSpec, l1: float):
-    """(torque, model) parts of every row's bound [N m] (4,) each: the stated torque error, and the model error
-    plus the latency and, for sample-instant torques, the applied torque between samples (torque_rows)."""
-    h = spec.sample_period
-    model = np.asarray(spec.model_error, dtype=float) * np.ones(N_JOINTS)
-    rate = np.zeros(N_JOINTS) if spec.torque_rate is None else np.asarray(spec.torque_rate, dtype=float)
-    lat = rate * (spec.latency + (h / 2 if spec.torque_timing == "sample" else 0.0))
-    return spec.torque_error * l1 * np.ones(N_JOINTS), (model + lat) * l1
-
-
 def _regressor_columns(steps: CertifiedSteps, kernel, windows):
     """The regressor side of the rows: {value, measurement, truncation, second_order, sign} (R, 4, 14) and the
     Coulomb columns' uncertain steps."""
@@ -409,14 +393,14 @@ def certified_rows(steps: CertifiedSteps, kernel, windows, tau) -> CertifiedEqua
     joint = np.arange(N_JOINTS)
     cols, sign_uncertain = _regressor_columns(steps, kernel, windows)
     y, fp, l1 = torque_rows(tau, windows, kernel, spec.torque_timing)
-    torque, model = _torque_side_bound(spec, l1)
-    terms_b = {"torque": np.broadcast_to(torque, (R, N_JOINTS)), "model": np.broadcast_to(model, (R, N_JOINTS)),
-               "rounding": fp}
+    side = torque_side_terms(spec, l1)  # the timing part is checked with the model's (the truth's own torque)
+    terms_b = {"torque": np.broadcast_to(side["torque"], (R, N_JOINTS)),
+               "model": np.broadcast_to(up(side["model"] + side["timing"]), (R, N_JOINTS)), "rounding": fp}
     m = R * N_JOINTS
     terms = {k: np.ascontiguousarray(v).reshape(m) for k, v in terms_b.items()}
     terms.update({k: cols[k].reshape(m, p) for k in ("measurement", "truncation", "second_order", "sign")})
-    D = terms["measurement"] + terms["truncation"] + terms["second_order"] + terms["sign"]
-    bound = terms["torque"] + terms["model"] + terms["rounding"]
+    D = up(up(up(terms["measurement"] + terms["truncation"]) + terms["second_order"]) + terms["sign"])
+    bound = up(up(terms["torque"] + terms["model"]) + terms["rounding"])
     proven, proven_m = steps.proven, steps.proven_motion
     info = {"kernel_steps": kernel.steps, "kernel_l1": l1, "rows": m, "windows": R, "sign_uncertain_steps": int(sign_uncertain.sum()),
             "steps": int(steps.q.shape[0] - 1), "curvature_factor": CURVATURE_FACTOR,

@@ -81,10 +81,12 @@ from h4bench.ident.processing.weakform import (
     coulomb_columns,
     imot_columns,
     make_kernel,
+    row_check,
     torque_rows,
+    torque_side_terms,
     viscous_columns,
 )
-from h4bench.ident.processing.choice import kernel_family, stack_equations
+from h4bench.ident.processing.choice import kernel_family, stack_family
 from h4bench.ident.robots.serial import norm3
 from h4bench.ident.robots.serial_steps import PARTS, inertial_family
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
@@ -296,14 +298,9 @@ def certified_family(robot, base, q, tau, spec: ErrorSpec, *, stride: int | None
     inertial = _inertial(robot, geo, q, e, spec, m, kernels, progress, processes, reference)
     eqs = [_assemble(robot, base, q, tau, spec, e, m, geo, kern, kernel_shape, starts, part, first_sample, t0)
            for (kern, starts), part in zip(kernels, inertial)]
-    if len(eqs) == 1:
-        eqs[0].info["kernels"] = fam.to_dict()
-        return eqs[0]
-    info = dict(eqs[0].info, half_width=None, stride=None, window_seconds=None, kernels=fam.to_dict(),
-                rows=sum(e.info["rows"] for e in eqs), windows=sum(e.info["windows"] for e in eqs),
-                coulomb_uncertain_share=float(np.mean([e.info["coulomb_uncertain_share"] for e in eqs])),
-                seconds=time.perf_counter() - t0)
-    return stack_equations(eqs, info)
+    return stack_family(eqs, fam, half_width=None, stride=None, window_seconds=None,
+                        coulomb_uncertain_share=float(np.mean([e.info["coulomb_uncertain_share"] for e in eqs])),
+                        seconds=time.perf_counter() - t0)
 
 
 def _check_kernel(half_width, stride) -> None:
@@ -373,16 +370,14 @@ def _assemble(robot, base, q, tau, spec, e, m, geo, kern, kernel_shape, starts, 
     Fqdd, r_qdd_pos, _ = imot_columns(q, e, windows, kern)
     Fqd, r_qd_pos, r_qd_mot = viscous_columns(q, e, windows, kern, qddm)
     Fsign, r_sign, _ = coulomb_columns(q, e, windows, kern, qddm, spec.friction_band)
-    if robot.coupled_wrist is not None:  # sign(qd_a + qd_b) of the wrist motor, the same per-step rule
+    if robot.coupled_wrist is not None:  # sign(qd_a + qd_b) of the wrist motor: the Coulomb column of q_a + q_b
         a, b = robot.coupled_wrist
-        v1 = np.diff(q, axis=0) / dt
-        vm = v1[:, a] + v1[:, b]
-        # the motor's friction band: the two joints' bands summed (the motor turns at qd_a + qd_b)
-        margin = up(up((e[:-1, a] + e[1:, a] + e[:-1, b] + e[1:, b]) / dt + 0.5 * (qddm[a] + qddm[b]) * dt)
-                    + up(spec.friction_band[a] + spec.friction_band[b]))
-        cm = np.abs(vm) > margin
-        Fsign_m = windows.gather(np.where(cm, np.sign(vm), 0.0)) @ K1
-        r_sign_m = up(windows.gather((~cm).astype(float)) @ K1 + gamma_l)
+        qm = q[:, a] + q[:, b]
+        em = up(up(e[:, a] + e[:, b]) + 2.0**-53 * np.abs(qm))  # the sum's own rounding with the two errors
+        # the motor turns at qd_a + qd_b: its acceleration bound and friction band are the two joints' summed
+        Fsign_m, r_sign_m, _ = coulomb_columns(qm[:, None], em[:, None], windows, kern, up(qddm[a] + qddm[b]),
+                                               up(spec.friction_band[a] + spec.friction_band[b]))
+        Fsign_m, r_sign_m = Fsign_m[:, 0], r_sign_m[:, 0]
     y, y_fp, k_abs = torque_rows(tau, windows, kern, spec.torque_timing)
     # ---- assemble the standard columns (n rows per window)
     p = robot.n_parameters
@@ -431,13 +426,9 @@ def _assemble(robot, base, q, tau, spec, e, m, geo, kern, kernel_shape, starts, 
     Dflt = np.zeros((R_, nj, p))
     Dflt[:, :, :ni] = ((_PIN_REL + gamma_l) * mag + recon) * mask[None]
     Dflt[:, :, ni:] = gamma_l * np.abs(Wc[:, :, ni:])
-    # ---- torque side
-    t_err = spec.torque_error * k_abs
-    if spec.torque_timing == "sample" and spec.torque_rate is not None:
-        t_err = t_err + spec.torque_rate * dt / 2 * k_abs
-    if spec.latency > 0:
-        t_err = t_err + spec.torque_rate * spec.latency * k_abs
-    model_term = spec.model_error * k_abs
+    # ---- torque side (the applied torque's timing with the stated error: both of the torque signal)
+    side = torque_side_terms(spec, k_abs)
+    t_err, model_term = up(side["torque"] + side["timing"]), side["model"]
     y_rnd = y_fp
     # ---- base columns, flattened rows (window-major, joint-minor)
     ind = np.asarray(base.independent)
@@ -466,8 +457,6 @@ def _assemble(robot, base, q, tau, spec, e, m, geo, kern, kernel_shape, starts, 
         parts[name] = flat(full)[:, ind]
     return CertifiedEquation(Wc=Wfull[:, ind], D=D, y=y.reshape(-1), bound=bound, joint=joint, window=window,
                              names=tuple(base.names), terms=terms, parts=parts, info=info)
-    return CertifiedEquation(Wc=Wfull[:, ind], D=D, y=y.reshape(-1), bound=bound, joint=joint, window=window,
-                             names=tuple(base.names), terms=terms, parts=parts, info=info)
 
 
 def certificate(eq: CertifiedEquation, W_true, y_true, theta_true) -> dict:
@@ -480,20 +469,17 @@ def certificate(eq: CertifiedEquation, W_true, y_true, theta_true) -> dict:
     largest actual error over its radius), per term its max and median row radius at theta and its share of
     the summed radii (``terms``), and the same for the inertial parts (``parts``).
     """
-    W_true = np.asarray(W_true, dtype=float)
-    y_true = np.asarray(y_true, dtype=float)
     th = np.asarray(theta_true, dtype=float)
-    err_W = np.abs(eq.Wc - W_true)
-    err_y = np.abs(eq.y - y_true)
-    res = np.abs(eq.y - eq.Wc @ th)
     total = eq.row_radius(np.abs(th))["total"]
+    rows = row_check(eq.y - eq.Wc @ th, total)
     summary = eq.summary(np.abs(th))
     return {
-        "rows": int(len(eq)), "entry_violations": int(np.sum(err_W > eq.D)),
-        "torque_violations": int(np.sum(err_y > eq.bound)), "violations": int(np.sum(res > total)),
-        "min_margin": float(np.min(total - res)), "max_ratio": float(np.max(res / total)),
-        "actual_max": float(np.max(res)), "radius_median": float(np.median(total)),
-        "terms": summary["terms"], "parts": summary["parts"],
+        "rows": int(len(eq)),
+        "entry_violations": row_check(eq.Wc - np.asarray(W_true, dtype=float), eq.D)["violations"],
+        "torque_violations": row_check(eq.y - np.asarray(y_true, dtype=float), eq.bound)["violations"],
+        "violations": rows["violations"], "min_margin": rows["min_margin"],
+        "max_ratio": rows["max_actual_over_radius"], "actual_max": rows["max_actual"],
+        "radius_median": float(np.median(total)), "terms": summary["terms"], "parts": summary["parts"],
     }
 
 

@@ -210,3 +210,29 @@ def test_friction_band_covers_a_friction_law_that_is_coulomb_only_above_it():
                 worst = max(worst, abs(exact - fs * value[r, j]) - fs * radius[r, j])
         missed[bool(stated.any())] = worst
     assert missed[True] <= 1e-9 and missed[False] > 1e-3
+
+
+@pytest.mark.parametrize("timing, latency, rate", [("hold", 0.0, None), ("sample", 0.0, [40.0, 3.0]),
+                                                   ("sample", 2e-3, [40.0, 3.0]), ("hold", 1e-3, [0.1, 7.0]),
+                                                   ("hold", 0.0, [5.0, 5.0])])
+def test_torque_side_terms_bound_the_exact_products(timing, latency, rate):
+    """Each term at or above its exact value (rational arithmetic on the floats given), within 4 ulp of it."""
+    from fractions import Fraction
+
+    from h4bench.ident.processing.errorspec import ErrorSpec
+    from h4bench.ident.processing.weakform import torque_side_terms
+
+    h, l1 = 1e-3, 1.0000000000000033
+    spec = ErrorSpec(n_joints=2, sample_period=h, position_resolution=1e-4, torque_error=[0.3, 0.7],
+                     model_error=[0.1, 0.0], qd_max=[1.0, 1.0], qdd_max=[10.0, 10.0], torque_timing=timing,
+                     latency=latency, torque_rate=rate)
+    got = torque_side_terms(spec, l1)
+    span = Fraction(latency) + (Fraction(h) / 2 if timing == "sample" else 0)
+    exact = {"torque": [Fraction(x) * Fraction(l1) for x in (0.3, 0.7)],
+             "model": [Fraction(x) * Fraction(l1) for x in (0.1, 0.0)],
+             "timing": [Fraction(r) * span * Fraction(l1) for r in (rate or [0.0, 0.0])]}
+    for key, values in exact.items():
+        for g, x in zip(got[key], values):
+            assert Fraction(float(g)) >= x
+            assert float(g) <= float(x) * (1 + 8 * 2.0**-53) + 1e-300, key
+    assert (got["timing"] > 0).all() == (rate is not None and (timing == "sample" or latency > 0))
