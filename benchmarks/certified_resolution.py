@@ -2,7 +2,7 @@
 scenario, the certified box's width over the tuned hull's (geometric mean over the parameters) per step, each
 term's mean share of the certified row radius, a markdown table and a PNG plot.
 
-    python benchmarks/certified_resolution.py [--quick] [--seed 0] [--out runs/certified-resolution]
+    python benchmarks/certified_resolution.py [--quick] [--seed 0] [--exponents 12,13] [--out runs/certified-resolution]
 
 The tuned hull keeps its spec's allowance (0.2 N m) at every resolution: where its processed equation is
 proven empty (a coarse encoder) the row says so. Same trajectory and noise seed at every step.
@@ -27,10 +27,12 @@ EXPONENTS = range(14, 23)
 TERMS = ("torque", "measurement", "second_order", "truncation", "sign")
 
 
-def sweep(quick: bool, seed: int) -> list[dict]:
+def sweep(quick: bool, seed: int, exponents=EXPONENTS) -> list[dict]:
+    from h4bench.scenarios.certified_verdict import AT_PRIOR
+
     base = load_spec("certified", quick=quick)
     rows = []
-    for ex in EXPONENTS:
+    for ex in exponents:
         spec = copy.deepcopy(base)
         spec["encoder"]["counts_per_turn"] = 2**ex
         t0 = time.perf_counter()
@@ -45,9 +47,21 @@ def sweep(quick: bool, seed: int) -> list[dict]:
                      "violations": cert["violations"], "min_margin": cert["min_margin"],
                      "shares": {k: cert["shares"][k] for k in TERMS},
                      "terms_max": {k: cert["terms"][k] for k in TERMS},
+                     "at_prior": _at_prior(extra["certified_entry"], run_.prior, AT_PRIOR),
                      "seconds": time.perf_counter() - t0})
-        print(f"2^{ex}: ratio {rows[-1]['width_vs_tuned_geomean']}, violations {cert['violations']}", flush=True)
+        print(f"2^{ex}: ratio {rows[-1]['width_vs_tuned_geomean']}, violations {cert['violations']}, at the prior: "
+              f"{', '.join(rows[-1]['at_prior']) or 'none'}", flush=True)
     return rows
+
+
+def _at_prior(entry: dict, prior, at: float) -> list[str]:
+    """The names of the parameters whose certified width is at least ``at`` of the prior's (all, without a box)."""
+    from h4bench.ident.robots.h4 import PARAMETER_NAMES
+
+    if entry["status"] != "ok":
+        return list(PARAMETER_NAMES)
+    rel = np.asarray(entry["width"]) / (prior.upper - prior.lower)
+    return [n for n, r in zip(PARAMETER_NAMES, rel) if r >= at]
 
 
 def table(rows: list[dict]) -> str:
@@ -99,10 +113,12 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="the 4 s trajectory of the scenario's quick size")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("runs/certified-resolution"))
+    ap.add_argument("--exponents", default=None, help="log2 counts per turn, e.g. 12,13 (default 14..22)")
     ap.add_argument("--threads", default=None, help="BLAS threads (read by _setup)")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = sweep(args.quick, args.seed)
+    exponents = EXPONENTS if args.exponents is None else [int(x) for x in args.exponents.split(",")]
+    rows = sweep(args.quick, args.seed, exponents)
     atomic_write_bytes(args.out / "sweep.json", json.dumps(rows, indent=2).encode())
     atomic_write_bytes(args.out / "sweep.md", table(rows).encode())
     plot(rows, args.out / "sweep.png")
