@@ -48,9 +48,15 @@ def sweep(quick: bool, seed: int, exponents=EXPONENTS) -> list[dict]:
                      "shares": {k: cert["shares"][k] for k in TERMS},
                      "terms_max": {k: cert["terms"][k] for k in TERMS},
                      "at_prior": _at_prior(extra["certified_entry"], run_.prior, AT_PRIOR),
+                     "tuned_width_over_prior": None if "hull" not in run_.boxes else
+                     (run_.boxes["hull"].width / (run_.prior.upper - run_.prior.lower)).tolist(),
+                     "friction_band": extra["error_model"].get("friction_band"),
                      "seconds": time.perf_counter() - t0})
         print(f"2^{ex}: ratio {rows[-1]['width_vs_tuned_geomean']}, violations {cert['violations']}, at the prior: "
-              f"{', '.join(rows[-1]['at_prior']) or 'none'}", flush=True)
+              f"{', '.join(rows[-1]['at_prior']) or 'none'}; tuned width/prior "
+              + ("(no box)" if rows[-1]["tuned_width_over_prior"] is None
+                 else " ".join(f"{w:.3g}" for w in rows[-1]["tuned_width_over_prior"]))
+              + f"; friction_band {rows[-1]['friction_band']}", flush=True)
     return rows
 
 
