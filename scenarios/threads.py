@@ -55,7 +55,9 @@ def hull_processes() -> int:
     (:func:`ident.robots.serial_certified.certified_family`, the TX40 study's identification and held-out
     equations) and of the H4's interval jets (:func:`ident.robots.h4_certified.certified_steps`); speed only: 1 and
     2 give the same box. ``H4BENCH_HULL_PROCESSES`` (1 or 2) if set, else 2 when this process may use 2 cores or
-    more. A campaign's workers (one per core already) set it to 1 unless it is set."""
+    more. A campaign's workers (one per core already) set it to 1 unless it is set; a daemonic process (e.g. a Dask
+    worker's), which may not start processes of its own, gets 1."""
+    import multiprocessing
     import os
 
     env = os.environ.get("H4BENCH_HULL_PROCESSES")
@@ -63,6 +65,8 @@ def hull_processes() -> int:
         if env not in ("1", "2"):
             raise ValueError(f"H4BENCH_HULL_PROCESSES must be 1 or 2, got {env!r}")
         return int(env)
+    if multiprocessing.current_process().daemon:
+        return 1
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux

@@ -116,3 +116,31 @@ def test_two_processes_give_the_same_bits(geometry, monkeypatch):
             np.testing.assert_array_equal(a.terms[k], b.terms[k])
     with pytest.raises(ValueError, match="processes must be 1 or 2"):
         certified_equation(geometry, q_meas, tau, spec, processing, processes=3)
+
+
+def test_nonlinear_rows_any_chunk_and_a_loop_oracle(geometry):
+    """nonlinear_rows gives the same bits for any row chunk; its first-order encoder radius equals a per-row loop
+    that sums |d row / d q_u| e_u from the per-step derivatives (the summation by parts written out)."""
+    from h4bench.ident.processing.weakform import make_kernel, nonlinear_rows, row_windows
+
+    q_true, q_meas, res = _log(geometry)
+    spec = _spec(res, q_true)
+    st = certified_steps(geometry, q_meas, spec, Processing()).nonlinear
+    h = spec.sample_period
+    kernel, windows = make_kernel(40, h, "hann"), row_windows(q_meas.shape[0], 40, 3)
+    outs = [nonlinear_rows(st, windows, kernel, chunk=c) for c in (None, 1, 4, 1000)]
+    for other in outs[1:]:
+        for a, b in zip(outs[0], other):
+            np.testing.assert_array_equal(a, b)
+    value, meas = outs[0][0], outs[0][1]
+    s, K = kernel.slopes, kernel.integrals
+    for r, j0 in enumerate(windows.start):
+        v = sum(-h * s[w] * st.P[j0 + w] + K[w] * st.F[j0 + w] for w in range(40))
+        np.testing.assert_allclose(value[r], v, rtol=1e-12, atol=1e-15)
+        g = np.zeros((41,) + st.dPa.shape[1:])
+        for w in range(40):
+            g[w] += -h * s[w] * st.dPa[j0 + w] + K[w] * st.dFa[j0 + w]
+            g[w + 1] += -h * s[w] * st.dPb[j0 + w] + K[w] * st.dFb[j0 + w]
+        first = np.einsum("uica,ua->ic", np.abs(g), st.e[j0:j0 + 41])
+        assert np.all(meas[r] >= first * (1 - 1e-12))  # the radius holds the plain first-order term
+        assert np.all(meas[r] <= first * 1.5 + 1e-9)  # and not much more (radii of the enclosures, rounding)
