@@ -24,7 +24,11 @@ for the equation but widened the box to 1.15 and 1.83 times the tuned hull (medi
 test on 2880 of 4000 steps. At cc74303, which split the interval jets' chunks between 2 processes (the same bits;
 measured on another 2-core machine, idle, where the simulation stage is faster: 0.136 s): (equation + certificate) /
 simulation 79.9 with 1 process, 53.9 with 2 (equation 9.64 -> 6.10 s, certificate 1.25 -> 1.24 s: it reuses the
-measured equation's motion bounds), the ratio 1.5; width/tuned median 1.07, 0 violations.
+measured equation's motion bounds), the ratio 1.5; width/tuned median 1.07, 0 violations. At e94b9ac (the rows of
+the nonlinear columns in chunks of about 1536 window steps, the same bits), the same machine: 72.3 with 1 process,
+46.7 with 2 (equation 8.80 -> 5.35 s, certificate 0.76 s, simulation 0.129 s); ``--full --seeds 0``: 78.2 and 50.0
+(equation 21.6 -> 12.9 s, certificate 2.2 s, simulation 0.305 s; at cc74303 84.7 and 56.9, equation 25.9 and 16.0 s,
+certificate 4.3 s).
 """
 
 import _setup  # noqa: F401  (repository root on sys.path, --threads)
