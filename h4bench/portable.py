@@ -12,14 +12,23 @@ and ``np.einsum`` without ``optimize`` (numpy's own loops, never BLAS), in an or
 - :func:`jacobi_svd`: singular values (and right singular vectors) by one-sided Jacobi rotations (batched),
   :func:`cond`: the 2-norm condition number from them, :func:`lstsq`: the minimum-norm least-squares solution
   with a relative cut-off (``np.linalg.lstsq``'s ``rcond``), :func:`qr_pivoted`: the column order and R's diagonal
-  of a Householder QR with column pivoting (ties broken by the column order, not by rounding).
+  of a Householder QR with column pivoting (ties broken by the column order, not by rounding);
+- :func:`atan2`, :func:`arccos`, :func:`arcsin`, :func:`exp`, :func:`log`, :func:`tanh`, :func:`nearest_power_of_two`: numpy's
+  transcendental ufuncs (``np.arccos``, ``np.exp``, ``np.log``, ``np.tanh``, ``np.log2``, sometimes
+  ``np.arctan2``) run SIMD code chosen at run time by CPU (AVX2, AVX-512: ``np.show_runtime()``), whose last bits
+  differ from one CPU to another (measured: ``NPY_DISABLE_CPU_FEATURES`` changed the trajectory design); these
+  evaluate fixed polynomials and rational functions by the correctly rounded operations, within a few units in
+  the last place of the true values;
+- :func:`smallest`, :func:`largest`: the indices of the k smallest or largest values, ties by index
+  (``np.argpartition`` and the default ``np.argsort`` run CPU-specific SIMD code that orders ties differently).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PIVOT_TIE", "cond", "det4", "jacobi_svd", "lstsq", "matmul", "qr_pivoted", "solve4"]
+__all__ = ["PIVOT_TIE", "arccos", "arcsin", "atan2", "cond", "det4", "exp", "jacobi_svd", "largest", "log", "lstsq",
+           "matmul", "nearest_power_of_two", "qr_pivoted", "smallest", "solve4", "tanh"]
 
 
 def matmul(a, b) -> np.ndarray:
@@ -229,3 +238,129 @@ def qr_pivoted(a):
             below = r[k + 1:, k:]
             below -= np.einsum("ji,i->j", below, x)[:, None] * (2.0 / vv) * x
     return d, piv
+
+
+# ------------------------------------------------------------------------------------- elementary functions
+# Hart et al., Computer Approximations (1968), index 5077: atan(x) = x P(x^2) / Q(x^2) on |x| <= tan(pi / 8)
+# (19.6 digits); P and Q from the highest power down, Q monic.
+_ATAN_P = (16.1536412982230228262, 268.42548195503973794141, 1153.0293515404850115428136,
+           1780.40631643319697105464587, 896.78597403663861959987488)
+_ATAN_Q = (58.95697050844462222791, 536.265374031215315104235, 1666.7838148816337184521798,
+           2079.33497444540981287275926, 896.78597403663861962481162)
+_TAN_PI_8, _TAN_3PI_8 = 0.414213562373095048802, 2.414213562373095048802
+_PI = 3.141592653589793
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 with its last 32 bits zero: n * _LN2_HI is exact for |n| < 2^20
+_LN2_LO = 1.90821492927058770002e-10
+_INV_LN2 = 1.44269504088896338700e+00
+_SQRT_HALF = 0.7071067811865476
+
+
+def _horner(z, coefficients, monic: bool = False):
+    """The polynomial of the coefficients (highest power first; ``monic``: a leading 1 before them) at z."""
+    p = z + coefficients[0] if monic else np.full_like(z, coefficients[0])
+    for c in coefficients[1:]:
+        p = p * z + c
+    return p
+
+
+def _atan_positive(a):
+    """atan(a) for a >= 0 (inf allowed): reduced to |x| <= tan(pi / 8) by ``pi/2 - atan(1/a)`` and
+    ``pi/4 + atan((a - 1) / (a + 1))``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.where(a < _TAN_PI_8, a, np.where(a > _TAN_3PI_8, -1.0 / a, (a - 1.0) / (a + 1.0)))
+    z = x * x
+    t = x * _horner(z, _ATAN_P) / _horner(z, _ATAN_Q, monic=True)
+    return np.where(a < _TAN_PI_8, t, np.where(a > _TAN_3PI_8, _PI / 2 + t, _PI / 4 + t))
+
+
+def atan2(y, x) -> np.ndarray:
+    """``np.arctan2(y, x)`` [rad] in (-pi, pi], the same bits on any CPU (module docstring); atan2(0, 0) = 0."""
+    y, x = np.broadcast_arrays(np.asarray(y, dtype=float), np.asarray(x, dtype=float))
+    ay, ax = np.abs(y), np.abs(x)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = _atan_positive(np.where((ay == 0) & (ax == 0), 0.0, ay / ax))
+    t = np.where(np.signbit(x) & ~((ay == 0) & (ax == 0) & ~np.signbit(x)), _PI - t, t)
+    t = np.where((ay == 0) & (ax == 0), np.where(np.signbit(x), _PI, 0.0), t)
+    return np.copysign(t, y)
+
+
+def arccos(x) -> np.ndarray:
+    """``np.arccos(x)`` [rad] for x in [-1, 1] as ``atan2(sqrt((1 - x)(1 + x)), x)`` (:func:`atan2`; NaN outside)."""
+    x = np.asarray(x, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return atan2(np.sqrt((1.0 - x) * (1.0 + x)), x)
+
+
+_EXP_TAYLOR = tuple(1.0 / math_factorial for math_factorial in
+                    (6227020800.0, 479001600.0, 39916800.0, 3628800.0, 362880.0, 40320.0, 5040.0, 720.0, 120.0,
+                     24.0, 6.0, 2.0, 1.0, 1.0))  # 1 / k! for k = 13 .. 0 (the factorials are exact floats)
+
+
+def arcsin(x) -> np.ndarray:
+    """``np.arcsin(x)`` [rad] for x in [-1, 1] as ``atan2(x, sqrt((1 - x)(1 + x)))`` (:func:`atan2`; NaN outside)."""
+    x = np.asarray(x, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return atan2(x, np.sqrt((1.0 - x) * (1.0 + x)))
+
+
+def exp(x) -> np.ndarray:
+    """``np.exp(x)``, the same bits on any CPU: ``x = n ln 2 + r``, |r| <= ln 2 / 2 (Cody and Waite), exp(r) by
+    its Taylor polynomial of degree 13 (truncation under 5e-18 relative), times 2^n exactly."""
+    x = np.asarray(x, dtype=float)
+    with np.errstate(invalid="ignore", over="ignore"):
+        n = np.clip(np.rint(x * _INV_LN2), -1100.0, 1100.0)
+        r = (x - n * _LN2_HI) - n * _LN2_LO
+        out = np.ldexp(_horner(r, _EXP_TAYLOR), np.where(np.isfinite(n), n, 0.0).astype(np.int64))
+    # beyond the float range: 0 below log(2^-1075), inf above log(DBL_MAX) (and NaN kept)
+    return np.where(np.isnan(x), np.nan, np.where(x > 709.782712893384, np.inf, np.where(x < -745.1332191019412,
+                                                                                          0.0, out)))
+
+
+_LOG_SERIES = tuple(1.0 / k for k in (23.0, 21.0, 19.0, 17.0, 15.0, 13.0, 11.0, 9.0, 7.0, 5.0, 3.0))
+
+
+def log(x) -> np.ndarray:
+    """``np.log(x)``, the same bits on any CPU: ``x = m 2^e`` exactly (``frexp``, m in [sqrt(1/2), sqrt(2))),
+    ``log m = 2 atanh(s)``, ``s = (m - 1) / (m + 1)`` (|s| <= 0.172) by its series to s^23 (truncation under
+    1e-19), plus ``e ln 2`` in two parts. 0 gives -inf, a negative number NaN."""
+    x = np.asarray(x, dtype=float)
+    m, e = np.frexp(x)
+    small = m < _SQRT_HALF
+    m = np.where(small, 2.0 * m, m)
+    e = (e - small).astype(float)
+    f = m - 1.0  # exact (Sterbenz)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = f / (2.0 + f)
+        z = s * s
+        log_m = 2.0 * s + 2.0 * s * (z * _horner(z, _LOG_SERIES))
+        out = e * _LN2_HI + (log_m + e * _LN2_LO)
+    special = np.where(x == 0, -np.inf, np.where(x < 0, np.nan, x))
+    return np.where((x > 0) & np.isfinite(x), out, special)
+
+
+def tanh(x) -> np.ndarray:
+    """``np.tanh(x)``, the same bits on any CPU: ``(1 - t) / (1 + t)`` with ``t = exp(-2 |x|)`` (:func:`exp`), its
+    sign x's (absolute error about 1e-16 near 0, relative error a few ulp elsewhere)."""
+    x = np.asarray(x, dtype=float)
+    t = exp(-2.0 * np.abs(x))
+    return np.copysign((1.0 - t) / (1.0 + t), x)
+
+
+def nearest_power_of_two(v) -> np.ndarray:
+    """``np.rint(np.log2(v))`` for v > 0 (an int array), decided exactly: ``v = m 2^e`` (``frexp``, m in
+    [1/2, 1)) is nearer 2^e than 2^(e - 1) on the log scale when m >= sqrt(1/2) (never a tie: sqrt(1/2) is not a
+    float)."""
+    m, e = np.frexp(np.asarray(v, dtype=float))
+    return (e - (m < _SQRT_HALF)).astype(np.int64)
+
+
+def smallest(x, k: int) -> np.ndarray:
+    """The indices of the ``k`` smallest values of the 1-D array x, in increasing order of value, ties by index
+    (a stable sort: the same on any CPU, where ``np.argpartition`` is not); all of them when k >= x.size."""
+    return np.argsort(np.asarray(x), kind="stable")[:max(int(k), 0)]
+
+
+def largest(x, k: int) -> np.ndarray:
+    """The indices of the ``k`` largest values of the 1-D array x, the largest first, ties by index
+    (:func:`smallest` of -x)."""
+    return smallest(-np.asarray(x), k)

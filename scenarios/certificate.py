@@ -31,6 +31,7 @@ import numpy as np
 from h4bench.ident.processing.errorspec import ErrorSpec
 from h4bench.ident.processing.motion_check import check_motion_bounds
 from h4bench.ident.processing.weakform import row_check
+from h4bench.portable import exp, log
 from h4bench.ident.robots.h4_certified import Processing, certified_equation, stated_assumptions
 from h4bench.scenarios import judging
 from h4bench.scenarios.certified_verdict import H4_HINTS, prior_diagnosis, row_radius_summary
@@ -224,5 +225,5 @@ def certify(run_, spec: dict) -> dict:
     if entry["status"] == "ok" and tuned is not None:
         ratio = np.asarray(entry["width"]) / np.maximum(tuned.width, 1e-300)
         out["width_vs_tuned"] = ratio.tolist()
-        out["width_vs_tuned_geomean"] = float(np.exp(np.mean(np.log(ratio))))
+        out["width_vs_tuned_geomean"] = float(exp(np.mean(log(ratio))))
     return out

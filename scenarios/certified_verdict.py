@@ -95,7 +95,7 @@ def prior_diagnosis(names, relative_width, terms: dict, theta_abs, y, hints: dic
     term = np.asarray(terms[dominant])
     if term.ndim == 2:
         contrib = term.sum(axis=0) * th
-        order = np.argsort(contrib)[::-1]
+        order = np.argsort(-contrib, kind="stable")
         cum = np.cumsum(contrib[order]) / max(float(contrib.sum()), 1e-300)
         keep = order[: int(np.searchsorted(cum, 0.9)) + 1]
         out["columns"] = [{"name": str(names[j]), "max_radius_per_unit": float(term[:, j].max())} for j in keep]

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from h4bench.portable import atan2, exp, log
 from h4bench.sim.controller import TAU_MAX_DEFAULT, JointController
 from h4bench.sim.validation import N_JOINTS, axis_array, positive, real
 
@@ -101,23 +102,59 @@ def _axis_systems(J: float, Fv: float, kp: float, kv: float, ki: float, tau_v: f
     }
 
 
+def _polyval_complex(c, xr, xi):
+    """(real, imaginary) parts of the polynomial c (real coefficients, highest power first) at xr + j xi, by
+    Horner's rule in real arithmetic: numpy's complex products run FMA code on some CPUs (other last bits)."""
+    pr, pi = np.full_like(xr, c[0]), np.zeros_like(xr)
+    for a in c[1:]:
+        pr, pi = pr * xr - pi * xi + a, pr * xi + pi * xr
+    return pr, pi
+
+
 def _frequency_response(sys, w) -> np.ndarray:
-    """Complex response of a SISO transfer function at w [rad/s] (discrete: at z = exp(j w dt))."""
+    """Complex response of a SISO transfer function at w [rad/s] (discrete: at z = exp(j w dt)), the same bits on
+    any CPU (real arithmetic, :func:`_polyval_complex`; sin and cos, whose numpy code is the same everywhere)."""
     num, den = _tf_parts(sys)
     w = np.asarray(w, dtype=float)
-    x = 1j * w if sys.dt in (0, None) else np.exp(1j * w * sys.dt)
-    return np.polyval(num, x) / np.polyval(den, x)
+    if sys.dt in (0, None):
+        xr, xi = np.zeros_like(w), w
+    else:
+        xr, xi = np.cos(w * sys.dt), np.sin(w * sys.dt)
+    nr, ni = _polyval_complex(num, xr, xi)
+    dr, di = _polyval_complex(den, xr, xi)
+    q = dr * dr + di * di
+    out = np.empty(w.shape, dtype=complex)
+    out.real, out.imag = (nr * dr + ni * di) / q, (ni * dr - nr * di) / q
+    return out
+
+
+def _magnitude(z) -> np.ndarray:
+    """|z| by hypot of the parts (numpy's complex absolute value differs in its last bits between CPUs)."""
+    z = np.asarray(z)
+    return np.hypot(z.real, z.imag)
+
+
+def _log_grid(w_lo: float, w_hi: float, n: int) -> np.ndarray:
+    """``n`` frequencies from w_lo to w_hi, equally spaced on a log scale (:func:`h4bench.portable.exp` and
+    :func:`~h4bench.portable.log`: ``np.logspace``'s powers differ in their last bits between CPUs)."""
+    return exp(np.linspace(float(log(w_lo)), float(log(w_hi)), n))
 
 
 def _bandwidth(sys, w_max: float) -> float:
     """First angular frequency where |sys| drops below 1/sqrt(2) (DC gain 1 assumed) [rad/s]; nan if none."""
-    w = np.logspace(math.log10(w_max) - 9.0, math.log10(w_max), 4000)
-    g = np.abs(_frequency_response(sys, w))
+    w = _log_grid(w_max * 1e-9, w_max, 4000)
+    g = _magnitude(_frequency_response(sys, w))
     below = np.flatnonzero(g < 1.0 / math.sqrt(2.0))
     if below.size == 0 or below[0] == 0:
         return float("nan")
     i = below[0]
-    return brentq(lambda x: abs(_frequency_response(sys, x)) - 1.0 / math.sqrt(2.0), w[i - 1], w[i])
+    return brentq(lambda x: float(_magnitude(_frequency_response(sys, x))) - 1.0 / math.sqrt(2.0), w[i - 1], w[i])
+
+
+def _angle(z) -> np.ndarray:
+    """The argument of z [rad] (:func:`h4bench.portable.atan2`; ``np.angle`` differs between CPUs)."""
+    z = np.asarray(z)
+    return atan2(z.imag, z.real)
 
 
 def _margins(loop, w_lo: float, w_hi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -129,18 +166,18 @@ def _margins(loop, w_lo: float, w_hi: float) -> tuple[np.ndarray, np.ndarray, np
     gain crossovers where ``|L| = 1`` (pm = 180 + angle L, wrapped into (-180, 180]), phase crossovers where
     L crosses the negative real axis (gm = 1/|L|).
     """
-    w = np.logspace(math.log10(w_lo), math.log10(w_hi), 20000)
+    w = _log_grid(w_lo, w_hi, 20000)
     resp = _frequency_response(loop, w)
-    logmag = np.log(np.abs(resp))
-    wgc = [brentq(lambda x: math.log(abs(_frequency_response(loop, x))), w[k], w[k + 1], xtol=1e-12)
+    logmag = log(_magnitude(resp))
+    wgc = [brentq(lambda x: float(log(_magnitude(_frequency_response(loop, x)))), w[k], w[k + 1], xtol=1e-12)
            for k in np.flatnonzero(np.sign(logmag[:-1]) * np.sign(logmag[1:]) < 0)]
-    pm = [(math.degrees(float(np.angle(_frequency_response(loop, x)))) + 360.0) % 360.0 - 180.0 for x in wgc]
+    pm = [(math.degrees(float(_angle(_frequency_response(loop, x)))) + 360.0) % 360.0 - 180.0 for x in wgc]
     im = resp.imag
     negative = (resp.real[:-1] < 0) & (resp.real[1:] < 0)
     cross = np.flatnonzero((np.sign(im[:-1]) * np.sign(im[1:]) < 0) & negative)
     wpc = [brentq(lambda x: float(_frequency_response(loop, x).imag), w[k], w[k + 1], xtol=1e-12)
            for k in cross]
-    gm = [1.0 / abs(_frequency_response(loop, x)) for x in wpc]
+    gm = [1.0 / float(_magnitude(_frequency_response(loop, x))) for x in wpc]
     if loop.dt not in (0, None):  # at the Nyquist frequency (z = -1) a sampled loop is real
         num, den = _tf_parts(loop)
         end = np.polyval(num, -1.0) / np.polyval(den, -1.0)
@@ -189,11 +226,11 @@ def _analyse(systems: dict, dt: float | None, w_lo: float, w_max: float) -> Loop
     else:
         pm, wgc = float("nan"), float("nan")
     poles = np.asarray(ct.poles(systems["tracking"]))
-    stable = bool(np.all(np.abs(poles) < 1.0)) if dt is not None else bool(np.all(poles.real < 0.0))
+    stable = bool(np.all(_magnitude(poles) < 1.0)) if dt is not None else bool(np.all(poles.real < 0.0))
     rise = settle = over = float("nan")
     if stable:
         # horizon: 12 time constants of the slowest pole (ct's automatic one can be too short for it)
-        decay = -poles.real if dt is None else -np.log(np.abs(poles)) / dt
+        decay = -poles.real if dt is None else -log(_magnitude(poles)) / dt
         t_end = 12.0 / max(float(decay.min()), 1e-9)
         if dt is None:
             timepts = np.linspace(0.0, t_end, 20001)
@@ -295,7 +332,8 @@ def _phase(w: float, z: float, J: float, Fv: float, tau_v: float | None) -> floa
     """Unwrapped phase [rad] of L(j w) / Kv for Kp = z, Ki = z Kv."""
     s = 1j * w
     v = s if tau_v is None else s / (tau_v * s + 1.0)
-    return -math.atan2(z, w) + float(np.angle(z + v)) - math.pi / 2 - math.atan2(w * J, Fv)
+    c = z + v  # the arguments by h4bench.portable.atan2 (numpy's and the C library's differ between CPUs)
+    return -float(atan2(z, w)) + float(atan2(c.imag, c.real)) - math.pi / 2 - float(atan2(w * J, Fv))
 
 
 def _gain_per_kv(w: float, z: float, J: float, Fv: float, tau_v: float | None) -> float:
@@ -310,15 +348,15 @@ def _gains_at_crossover(wc: float, J: float, Fv: float, tau_v: float | None, pm:
     target = -math.pi + pm + wc * dt / 2.0
 
     def f(log_z: float) -> float:
-        return _phase(wc, math.exp(log_z), J, Fv, tau_v) - target
+        return _phase(wc, float(exp(log_z)), J, Fv, tau_v) - target
 
-    lo, hi = math.log(wc * 1e-9), math.log(wc * 1e6)
+    lo, hi = float(log(wc * 1e-9)), float(log(wc * 1e6))
     if f(lo) <= 0.0:
         raise ValueError(
             f"phase_margin_deg = {math.degrees(pm):g} cannot be reached at a crossover of "
             f"{wc / (2 * math.pi):.3g} Hz: the velocity filter, friction pole and sample-and-hold leave at most "
             f"{math.degrees(f(lo) + pm):.1f} deg; lower bandwidth_hz or phase_margin_deg")
-    z = math.exp(brentq(f, lo, hi, xtol=1e-12))
+    z = float(exp(brentq(f, lo, hi, xtol=1e-12)))
     kv = 1.0 / _gain_per_kv(wc, z, J, Fv, tau_v)
     return z, kv, z * kv
 

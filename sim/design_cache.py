@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from h4bench import portable
+
 __all__ = ["cache_root", "design_key", "load_array", "load_design", "store_array", "store_design"]
 
 CACHE_ENV = "H4BENCH_CACHE"
@@ -56,6 +58,8 @@ def design_key(J: np.ndarray, Fv: np.ndarray, bandwidth_hz: float, dt: float, pm
     for name in _CODE:
         h.update(name.encode())
         h.update((here / name).read_bytes())
+    h.update(b"portable.py")  # the design's logarithms (h4bench.portable.log)
+    h.update(Path(portable.__file__).read_bytes())
     inputs = [[float(v).hex() for v in J], [float(v).hex() for v in Fv], float(bandwidth_hz).hex(),
               float(dt).hex(), float(pm_deg).hex(), None if velocity_filter_hz is None else float(velocity_filter_hz).hex(),
               _versions()]

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from h4bench.portable import matmul, solve4
+from h4bench.portable import arccos, atan2, matmul, solve4
 from h4bench.sim.model import H4Geometry, arm_tips, nacelle_points  # the chain points live with the geometry
 
 
@@ -51,7 +51,7 @@ def _ik(geometry: H4Geometry, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c = (L**2 + np.einsum("nia,nia->ni", w, w) - l**2) / (2.0 * L)
     rho = np.hypot(a, b)
     ratio = c / rho
-    q = np.arctan2(b, a) - np.arccos(np.clip(ratio, -1.0, 1.0))
+    q = atan2(b, a) - arccos(np.clip(ratio, -1.0, 1.0))
     q = (q + np.pi) % (2.0 * np.pi) - np.pi
     return q, ratio
 

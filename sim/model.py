@@ -8,7 +8,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from h4bench.portable import matmul
+from h4bench.portable import arcsin, atan2, matmul
 
 
 
@@ -100,7 +100,7 @@ def assemble_loops(model: mujoco.MjModel, path="the model") -> float:
         sin, cos = float(np.sqrt(np.einsum("a,a->", axis, axis))), float(np.einsum("a,a->", x0, t))
         if sin > 0.0:
             turn, quat = np.zeros(4), np.zeros(4)
-            mujoco.mju_axisAngle2Quat(turn, axis / sin, np.arctan2(sin, cos))
+            mujoco.mju_axisAngle2Quat(turn, axis / sin, float(atan2(sin, cos)))
             mujoco.mju_mulQuat(quat, turn, model.body_quat[body])
             model.body_quat[body] = quat / np.sqrt(np.einsum("a,a->", quat, quat))
         if np.abs(model.body_ipos[body] - model.site_pos[end]).max() <= LOOP_TOLERANCE:
@@ -316,7 +316,7 @@ class H4Geometry:
         v = w * c - s * np.cross(k, w) + (1 - c) * np.sum(k * w, axis=-1, keepdims=True) * k  # rotate by -q
         u = np.einsum("iba,nib->nia", self.rod_rot, v)
         u = u / np.linalg.norm(u, axis=-1, keepdims=True)
-        return np.stack([np.arctan2(-u[..., 2], u[..., 0]), np.arcsin(np.clip(u[..., 1], -1.0, 1.0))], axis=-1)
+        return np.stack([atan2(-u[..., 2], u[..., 0]), arcsin(np.clip(u[..., 1], -1.0, 1.0))], axis=-1)
 
     def nacelle_pose(self, qpos) -> np.ndarray:
         """Nacelle pose x (n, 4) read from MuJoCo qpos (n, nq)."""

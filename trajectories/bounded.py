@@ -30,7 +30,6 @@ Lagrangian ``L = c^T delta - y^T (W delta - r)`` (r the active row bounds) gives
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +38,7 @@ from h4bench import ident
 from h4bench.ident.numerics.lp import LPError, LPModel
 from h4bench.ident.processing.filtering import ProcessingSettings
 from h4bench.ident.processing.processing import select_rows
+from h4bench.portable import exp, log
 from h4bench.trajectories.design import _IBC, _MNAC, _QD, _QDD, CoefficientProblem, grid_regressor
 
 #: Column bound of the half-width LPs: keeps every LP bounded when W is rank-deficient (then h_j = BIG).
@@ -117,12 +117,12 @@ def halfwidths(W, bases=None) -> HalfWidths:
 def smooth_max(h, targets, beta: float = BETA):
     """Smooth maximum ``F = (1/beta) log sum_j exp(beta log(h_j / target_j))`` of the log relative half-widths
     and its weights ``dF/dh_j`` (p,). Returns (F, weights)."""
-    r = np.log(np.asarray(h, float) / np.asarray(targets, float))
+    r = log(np.asarray(h, float) / np.asarray(targets, float))
     a = beta * r
     amax = a.max()
-    e = np.exp(a - amax)
+    e = exp(a - amax)
     s = e.sum()
-    return float((amax + math.log(s)) / beta), e / s / np.asarray(h, float)
+    return float((amax + float(log(s))) / beta), e / s / np.asarray(h, float)
 
 
 def processed_regressor(geometry, q, qd, qdd, settings: ProcessingSettings | None = None, structure="paper"):

@@ -30,7 +30,7 @@ from scipy.optimize import OptimizeResult, minimize
 
 from h4bench import sim
 from h4bench.blas import one_blas_thread
-from h4bench.portable import det4, jacobi_svd, solve4
+from h4bench.portable import arccos, atan2, det4, jacobi_svd, log, solve4, tanh
 
 #: The optimiser's Coulomb columns use tanh(qd / SIGN_WIDTH) for sign(qd) [rad/s]: sign has no derivative
 #: (a finite-difference step across qd = 0 would jump); samples that slow are excluded or given an interval
@@ -87,7 +87,7 @@ def fast_motion(geometry, x, xd, xdd) -> dict:
     ca, cb = np.sum(w * e, axis=-1), np.sum(w * f, axis=-1)
     L, lf = g.arm_length[None], g.forearm_length[None]
     ratio = (L**2 + np.sum(w * w, axis=-1) - lf**2) / (2.0 * L) / np.hypot(ca, cb)
-    q = np.arctan2(cb, ca) - np.arccos(np.clip(ratio, -1.0, 1.0))
+    q = atan2(cb, ca) - arccos(np.clip(ratio, -1.0, 1.0))
     q = (q + np.pi) % (2.0 * np.pi) - np.pi
     pb = L[..., None] * (np.cos(q)[..., None] * e + np.sin(q)[..., None] * f)
     ab = g.motor_pos[None] + pb - a_pts
@@ -191,10 +191,10 @@ class CoefficientProblem:
         """(W diag(theta)) v per sample and joint (n, 4) for a (14,) vector v, from outputs y (n, 29)."""
         th = self.theta
         return (th[0:4] * v[0:4] * y[:, _QDD] + th[4] * v[4] * y[:, _MNAC] + th[5] * v[5] * y[:, _IBC]
-                + th[6:10] * v[6:10] * y[:, _QD] + th[10:14] * v[10:14] * np.tanh(y[:, _QD] / SIGN_WIDTH))
+                + th[6:10] * v[6:10] * y[:, _QD] + th[10:14] * v[10:14] * tanh(y[:, _QD] / SIGN_WIDTH))
 
     def _scaled_regressor(self, y):
-        return grid_regressor(y, np.tanh(y[:, _QD] / SIGN_WIDTH)) * self.theta[None]
+        return grid_regressor(y, tanh(y[:, _QD] / SIGN_WIDTH)) * self.theta[None]
 
     def _violations(self, y):
         """Normalised violations (n, 33) per sample (<= 0 satisfied), in CONSTRAINT_NAMES order."""
@@ -278,12 +278,12 @@ class CoefficientProblem:
         lam, vec = sv[::-1] ** 2, vec[:, ::-1]  # ascending, as eigh's
         if lam[0] <= 0:
             return None
-        log_cond = 0.5 * np.log(lam[-1] / lam[0])
+        log_cond = 0.5 * float(log(lam[-1] / lam[0]))
         if dy is None:
             return log_cond, None
         grad = np.zeros(self.size)
         th = self.theta
-        tanh_d = (1.0 - np.tanh(y[:, _QD] / SIGN_WIDTH) ** 2) / SIGN_WIDTH
+        tanh_d = (1.0 - tanh(y[:, _QD] / SIGN_WIDTH) ** 2) / SIGN_WIDTH
         for idx, lam_i, sign in ((-1, lam[-1], 1.0), (0, lam[0], -1.0)):
             v = vec[:, idx]
             r = self._regressor_times(y, v)  # (n, 4)

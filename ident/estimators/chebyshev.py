@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from h4bench.portable import largest
 from h4bench.ident.estimators.hull import _CHUNK, PRIMAL_SIMPLEX, _matvec, _spread_rows
 from h4bench.ident.numerics.interval import mid_rad, point_matmul, up
 from h4bench.ident.numerics.lp import LPError, LPFallbackWarning, LPModel, column_scale, power2_scale
@@ -56,7 +57,7 @@ def _chebyshev_first_rows(e0, w, initial_rows: int) -> np.ndarray:
         res = np.abs(e0) / w
         res[ws_mask] = -np.inf
         k = initial_rows - int(ws_mask.sum())
-        ws_mask[np.argpartition(-res, k - 1)[:k]] = True
+        ws_mask[largest(res, k)] = True
     else:
         ws_mask[:] = True
     return ws_mask
@@ -156,7 +157,7 @@ def chebyshev(
         if bad.size == 0 or rounds >= max_rounds:
             break
         if bad.size > add_per_round:
-            bad = bad[np.argpartition(-worst[bad], add_per_round - 1)[:add_per_round]]
+            bad = bad[largest(worst[bad], add_per_round)]
         ws_mask[bad] = True
         order.append(bad)
         add_model_rows(bad)

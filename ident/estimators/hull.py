@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from h4bench.portable import largest, smallest
 from h4bench.ident.numerics.interval import down, up
 from h4bench.portable import matmul as pmatmul
 from h4bench.ident.estimators.hull_warm import HullWarm, tight_rows, usable
@@ -170,8 +171,7 @@ def _row_norms(W, d):
 def _near_rows(rho, pool_rows):
     """The ``pool_rows`` rows of smallest critical radius ``rho`` (all rows when there are fewer), sorted by it."""
     n_rows = rho.size
-    near = np.argpartition(rho, pool_rows - 1)[:pool_rows] if pool_rows < n_rows else np.arange(n_rows)
-    return near[np.argsort(rho[near], kind="stable")]
+    return smallest(rho, min(pool_rows, n_rows))  # sorted by rho, ties by index: the same on any CPU
 
 
 def _worst(v, candidates, violation_tol, add_rows):
@@ -181,7 +181,7 @@ def _worst(v, candidates, violation_tol, add_rows):
         return candidates[:0]
     idx, v = candidates[bad], v[bad]
     if idx.size > add_rows:
-        idx = idx[np.argpartition(-v, add_rows - 1)[:add_rows]]
+        idx = idx[largest(v, add_rows)]
     return idx
 
 

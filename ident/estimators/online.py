@@ -249,7 +249,7 @@ class OnlineHull:
                 break
             for j, rows in todo.items():
                 if not first and rows.size > self.add_rows:  # new rows go in at once; older ones the worst first
-                    rows = rows[np.argsort(-self._violation(rows, self._x[:, [j]])[:, 0])[: self.add_rows]]
+                    rows = rows[np.argsort(-self._violation(rows, self._x[:, [j]])[:, 0], kind="stable")[: self.add_rows]]
                 status = self._add_and_solve(j, rows)
                 if status == "infeasible":
                     fallback = self._infeasible()

@@ -531,7 +531,7 @@ def relaxed_hull(W, y, bound, prior, q: int, *, method: str = "auto", groups=Non
         v = W[active] @ ref
         viol = np.maximum(v - bu[active], bl[active] - v) / b[active]
         cand = np.flatnonzero((viol > 0) & ~np.isin(active, new))
-        cand = cand[np.argsort(-viol[cand])][: 2 * budget + 4]
+        cand = cand[np.argsort(-viol[cand], kind="stable")][: 2 * budget + 4]
         if cand.size and lp_certify:
             new = np.union1d(new, active[_certain_by_lp(W[active], y[active], b[active], first["labels"],
                                                         first["nonempty"], budget, cand, X_lo, X_hi)])

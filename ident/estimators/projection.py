@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from h4bench.ident.estimators.support import SupportLP
+from h4bench.portable import atan2, nearest_power_of_two
 
 __all__ = ["Polygon", "clip_halfplane", "convex_hull", "coupling_scores", "ellipse_points", "most_coupled_pairs",
            "polygon_area", "project_pair", "projections", "vertex_coupling", "zonogon"]
@@ -161,7 +162,7 @@ def project_pair(engine: SupportLP, i: int, j: int, *, directions: int = 32, ref
     names = tuple(names) if names is not None else tuple(f"theta{k + 1}" for k in range(p))
     lo, hi = engine.lower[[i, j]], engine.upper[[i, j]]
     w = hi - lo
-    s = np.ldexp(1.0, np.rint(np.log2(np.where(w > 0, w, np.maximum(np.abs(hi), 1.0)))).astype(int))  # exact
+    s = np.ldexp(1.0, nearest_power_of_two(np.where(w > 0, w, np.maximum(np.abs(hi), 1.0))))  # exact
     box = ((lo[0] / s[0], hi[0] / s[0]), (lo[1] / s[1], hi[1] / s[1]))
 
     def support(phi_list):
@@ -186,7 +187,7 @@ def project_pair(engine: SupportLP, i: int, j: int, *, directions: int = 32, ref
         gap = _gap(outer, np.array(pts)[finite]) if finite.sum() >= 3 else np.inf
         if _ >= refine or gap <= refine_tol:
             break
-        order = np.argsort(np.mod(phis, 2 * np.pi))
+        order = np.argsort(np.mod(phis, 2 * np.pi), kind="stable")
         new = []
         for a, b in zip(order, np.roll(order, -1)):
             pa, pb = pts[a], pts[b]
@@ -195,7 +196,7 @@ def project_pair(engine: SupportLP, i: int, j: int, *, directions: int = 32, ref
                 continue
             nn = np.array([e[1], -e[0]]) / np.linalg.norm(e)  # outward normal of the ccw edge
             if np.max(outer @ nn - nn @ pa) > refine_tol:
-                new.append(float(np.arctan2(nn[1], nn[0])))
+                new.append(float(atan2(nn[1], nn[0])))
         if not new:
             break
         n2, h2, p2 = support(new)
@@ -335,7 +336,7 @@ def zonogon(center, generators, i: int, j: int) -> np.ndarray:
     if G.shape[0] == 0:
         return c[None, :]
     G = np.where((G[:, 1:2] < 0) | ((G[:, 1:2] == 0) & (G[:, 0:1] < 0)), -G, G)  # upper half-plane
-    G = G[np.argsort(np.arctan2(G[:, 1], G[:, 0]))]
+    G = G[np.argsort(atan2(G[:, 1], G[:, 0]), kind="stable")]
     start = c - G.sum(axis=0)
     path = start + np.cumsum(np.vstack([2 * G, -2 * G]), axis=0)
     return np.vstack([start, path[:-1]])

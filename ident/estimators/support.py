@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 
+from h4bench.portable import largest
 from h4bench.ident.estimators.hull import PRIMAL_SIMPLEX, strip_bounds
 from h4bench.ident.numerics.interval import mul, sum_down
 from h4bench.ident.numerics.lp import LPError, LPModel, column_scale, power2_scale
@@ -95,7 +96,7 @@ class SupportLP:
         if n:
             dist = (np.abs(self.m0) - self.half) / (np.sqrt(np.einsum("ij,ij->i", W, W)) + 1e-300)
             k = min(n, int(initial_rows))
-            first = np.argpartition(-dist, k - 1)[:k] if k < n else np.arange(n)
+            first = largest(dist, k)
             spread = np.unique(np.linspace(0, n - 1, min(n, 2 * p)).round().astype(np.int64))
             self._add(np.union1d(first, spread))
 
@@ -116,7 +117,7 @@ class SupportLP:
         viol[self.mask] = -np.inf
         bad = np.flatnonzero(viol > self.violation_tol)
         if bad.size > self.add_rows:
-            bad = bad[np.argpartition(-viol[bad], self.add_rows - 1)[: self.add_rows]]
+            bad = bad[largest(viol[bad], self.add_rows)]
         return bad
 
     def minimize(self, c) -> tuple[float, np.ndarray | None]:

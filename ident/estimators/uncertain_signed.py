@@ -14,6 +14,7 @@ from h4bench.ident.box import Box
 from h4bench.ident.estimators.hull import COUNTERS
 from h4bench.ident.estimators.uncertain import uncertain_hull_rows
 from h4bench.ident.numerics.interval import down, point_matvec, up
+from h4bench.portable import exp, log
 from h4bench.portable import matmul as pmatmul
 
 __all__ = ["COARSE_GROUPS", "coarse_step", "signed_uncertain_hull"]
@@ -150,7 +151,7 @@ def _signed_hull(Wc, D, y, bound, prior, refine, rtol, coarse, coarse_rtol, grou
         box = Box(new_lo, new_hi, names=names, info=info)
         w_old, w_new = hi - lo, new_hi - new_lo
         pos = (w_old > 0) & (w_new > 0)
-        shrink = 1.0 - float(np.exp(np.mean(np.log(w_new[pos] / w_old[pos])))) if np.any(pos) else 0.0
+        shrink = 1.0 - float(exp(np.mean(log(w_new[pos] / w_old[pos])))) if np.any(pos) else 0.0
         lo, hi = new_lo, new_hi
         if progress is not None:
             progress(it + 1, int(refine) + 1)

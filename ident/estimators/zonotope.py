@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from h4bench.portable import largest
 from h4bench.ident import Box
 from h4bench.ident.estimators.registry import declare
 from h4bench.ident.estimators._common import SKIP_SLACK, RowScan, check_inputs, inconsistent, set_box
@@ -59,7 +60,7 @@ def _reduce(G: np.ndarray, keep: int) -> np.ndarray:
     """Girard's reduction: keep the ``keep`` largest generators by ``|g|_1 - |g|_inf``, box the rest."""
     A = np.abs(G)
     score = A.sum(axis=0) - A.max(axis=0)
-    idx = np.argpartition(score, -keep)[-keep:] if keep > 0 else np.empty(0, dtype=int)
+    idx = largest(score, keep)
     rest = np.ones(G.shape[1], dtype=bool)
     rest[idx] = False
     return np.concatenate([G[:, idx], np.diag(A[:, rest].sum(axis=1))], axis=1)

@@ -45,6 +45,7 @@ import numpy as np
 
 from h4bench.ident.errors import LPError, LPFallbackWarning
 from h4bench.portable import matmul as pmatmul
+from h4bench.portable import nearest_power_of_two
 
 __all__ = [
     "BASIC",
@@ -186,10 +187,10 @@ def power2_scale(v: np.ndarray) -> np.ndarray:
     """Powers of two ``2^-round(log2 v)`` (1 where v is 0): multiplying by them is exact barring underflow."""
     v = np.asarray(v, dtype=float)
     if v.size > 1 and v.ndim == 1 and v[0] > 0 and np.all(v == v[0]):  # one value (a scalar bound): one log
-        return np.full(v.shape, float(np.ldexp(1.0, -int(np.rint(np.log2(v[0]))))))
+        return np.full(v.shape, float(np.ldexp(1.0, -int(nearest_power_of_two(v[0])))))
     out = np.ones_like(v)
     pos = v > 0
-    out[pos] = np.ldexp(1.0, -np.rint(np.log2(v[pos])).astype(int))
+    out[pos] = np.ldexp(1.0, -nearest_power_of_two(v[pos]))
     return out
 
 

@@ -14,6 +14,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from h4bench.portable import exp
 from h4bench.sim.validation import N_JOINTS
 
 __all__ = [
@@ -186,7 +187,7 @@ class Drift(_Amplitude):
         if self.kind == "thermal":
             sign = rng.choice([-1.0, 1.0], N_JOINTS)
             c0 = rng.uniform(0.0, 1.0, N_JOINTS)
-            x = sign * (1.0 - (1.0 - c0) * np.exp(-t[:, None] / self.time_constant))
+            x = sign * (1.0 - (1.0 - c0) * exp(-t[:, None] / self.time_constant))
             return np.clip(a * x, -a, a)
         m = int(self.terms)
         freq = rng.uniform(0.0, self.cutoff_hz, (m, N_JOINTS))
