@@ -61,14 +61,20 @@ print(json.dumps({"hashes": run.content_hashes, "lower": [float(v).hex() for v i
 """
 
 
+def run_child(code: str, env: dict) -> dict:
+    """Run ``code`` in a fresh Python with the environment ``env`` (from the repository root); the JSON object its
+    last line prints."""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
 def _child(kernel: str, threads: int, cache: Path) -> dict:
     env = dict(os.environ, OPENBLAS_CORETYPE=kernel, OPENBLAS_NUM_THREADS=str(threads),
                OMP_NUM_THREADS=str(threads), H4BENCH_CACHE=str(cache))
     env.pop("OPENBLAS_L2_SIZE", None)
-    res = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, env=env, cwd=ROOT,
-                         timeout=300)
-    assert res.returncode == 0, res.stderr[-3000:]
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_child(CHILD, env)
 
 
 @pytest.fixture(scope="module")

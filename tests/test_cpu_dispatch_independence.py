@@ -13,19 +13,15 @@ hull's working set.
 
 from __future__ import annotations
 
-import json
 import os
-import subprocess
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.test_blas_independence import CHILD
+from tests.test_blas_independence import CHILD, run_child
 
-ROOT = Path(__file__).resolve().parents[1]
 
 H4_CHILD = """
 import hashlib, json
@@ -54,11 +50,7 @@ def _targets() -> list[str]:
 
 
 def _child(code: str, disabled: list[str], cache: Path) -> dict:
-    env = dict(os.environ, H4BENCH_CACHE=str(cache), NPY_DISABLE_CPU_FEATURES=" ".join(disabled))
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT,
-                         timeout=300)
-    assert res.returncode == 0, res.stderr[-3000:]
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    return run_child(code, dict(os.environ, H4BENCH_CACHE=str(cache), NPY_DISABLE_CPU_FEATURES=" ".join(disabled)))
 
 
 @pytest.fixture(scope="module")
