@@ -448,18 +448,18 @@ def _design(J: np.ndarray, Fv: np.ndarray, bandwidth_hz: float, dt: float, pm_de
     for i in range(N_JOINTS):  # 4 axes, not samples
 
         def bw_error(log_wc: float, i: int = i) -> float:
-            gains = _gains_at_crossover(math.exp(log_wc), J[i], Fv[i], tau_v, pm, dt)
+            gains = _gains_at_crossover(float(exp(log_wc)), J[i], Fv[i], tau_v, pm, dt)
             sysc = _axis_systems(J[i], Fv[i], *gains, tau_v, None)
-            return math.log(_bandwidth(sysc["tracking"], 1e3 * w_max) / w_bw)
+            return float(log(_bandwidth(sysc["tracking"], 1e3 * w_max) / w_bw))
 
         # bandwidth / crossover is about 1.3-1.7 for these loops: bracket generously
-        lo, hi = math.log(w_bw / 4.0), math.log(w_bw * 1.2)
+        lo, hi = float(log(w_bw / 4.0)), float(log(w_bw * 1.2))
         try:
             log_wc = brentq(bw_error, lo, hi, xtol=1e-10)
         except ValueError as exc:
             raise ValueError(f"axis {i + 1}: cannot reach bandwidth_hz = {bandwidth_hz:g} with "
                              f"phase_margin_deg = {pm_deg:g} ({exc})") from exc
-        kp[i], kv[i], ki[i] = _gains_at_crossover(math.exp(log_wc), J[i], Fv[i], tau_v, pm, dt)
+        kp[i], kv[i], ki[i] = _gains_at_crossover(float(exp(log_wc)), J[i], Fv[i], tau_v, pm, dt)
         w_lo = 1e-3 * min(kp[i], w_bw)  # three decades below the controller zeros
         cont.append(_analyse(_axis_systems(J[i], Fv[i], kp[i], kv[i], ki[i], tau_v, None), None, w_lo,
                              1e3 * w_max))
