@@ -39,6 +39,12 @@ eq = certified_equation(run.geometry, run.dataset.q[:600], run.dataset.tau[:600]
 h = hashlib.sha256()
 for a in (eq.Wc, eq.D, eq.y, eq.bound, eq.motion.HP, eq.motion.HF):
     h.update(np.ascontiguousarray(a).tobytes())
+# a log written with 6 significant digits: each value's decade and half unit (numpy's log10 and power differ by CPU)
+from h4bench.ident.processing.errorspec import ErrorSpec
+digits = ErrorSpec(n_joints=4, sample_period=1e-3, torque_error=1.0, qd_max=1.0, qdd_max=1.0, significant_digits=6)
+written = np.vectorize(lambda v: float(f"{v:.6g}"))(np.concatenate([run.dataset.q, 10.0 ** np.arange(-8, 8.0)[:, None]
+                                                                     * np.ones(4)]))
+h.update(digits.position_error(written).tobytes())
 print(json.dumps({"certified": h.hexdigest(), "hashes": run.content_hashes}))
 """
 

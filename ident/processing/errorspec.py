@@ -61,6 +61,25 @@ __all__ = ["ErrorSpec", "ErrorSpecError"]
 _PER_JOINT = ("position_resolution", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error",
               "friction_band")
 _ROUNDING = ("nearest", "floor")
+# 10^e for e in [_POW10_LOW, ...], each correctly rounded (Python's parsing of "1e<e>"): numpy's ``10.0 ** k`` and
+# ``np.log10`` run SIMD code chosen by CPU whose last bits differ (on an AVX-512 CPU ``10.0 ** k`` was one ulp
+# below the correctly rounded power for 29 of the exponents -300..300)
+_POW10_LOW = -340
+_POW10 = np.array([float(f"1e{e}") for e in range(_POW10_LOW, 320)])
+
+
+def _pow10(e) -> np.ndarray:
+    """10^e (e integral floats or ints), correctly rounded, the same bits on any CPU."""
+    i = np.clip(np.asarray(e, dtype=float) - _POW10_LOW, 0, _POW10.size - 1).astype(np.int64)
+    return _POW10[i]
+
+
+def _decade(a) -> np.ndarray:
+    """The exponent E with ``fl(10^E) <= a < fl(10^(E+1))`` for a > 0 (finite floats): ``log10`` gives it within one
+    on any CPU, the exact comparisons decide. A written decimal value is in the decade of the float it reads as."""
+    e = np.floor(np.log10(a))
+    e = np.where(a < _pow10(e), e - 1, e)
+    return np.where(a >= _pow10(e + 1), e + 1, e)
 _TIMING = ("hold", "sample")
 _KEYS = {"sample_period", "position_resolution", "counts_per_turn", "significant_digits", "position_rounding",
          "torque_timing", "latency", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error",
@@ -156,7 +175,7 @@ class ErrorSpec:
             step = self.position_resolution * (0.5 if self.position_rounding == "nearest" else 1.0)
             return np.broadcast_to(step, q.shape).copy()
         a = np.abs(q)
-        exponent = np.floor(np.log10(np.where(a > 0, a, 1.0)))
+        exponent = _decade(np.where(a > 0, a, 1.0))
         # an exact zero is written "0": the true value was below half a unit of the smallest place written, which
         # for a fixed number of significant digits is not bounded; take the place of the smallest non-zero value
         # of that joint (a stated, data-driven floor, conservative for a joint that passes through zero)
@@ -164,7 +183,8 @@ class ErrorSpec:
         floor_exp = np.min(nonzero, axis=0)
         floor_exp = np.where(np.isfinite(floor_exp), floor_exp, 0.0)
         exponent = np.where(a > 0, exponent, floor_exp[None, :])
-        half_ulp = 0.5 * 10.0 ** (exponent - (self.significant_digits - 1))
+        # 10^k correctly rounded (at most half an ulp below 10^k), halved exactly, one ulp up: >= half a unit
+        half_ulp = 0.5 * _pow10(exponent - (self.significant_digits - 1))
         return np.nextafter(half_ulp, np.inf)
 
     # ---------------------------------------------------------------------------------------------- conversions

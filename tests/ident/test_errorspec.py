@@ -74,3 +74,23 @@ def test_a_value_that_is_not_a_number_is_an_error_spec_error():
         _spec(qdd_max="fast")
     with pytest.raises(ErrorSpecError, match="latency must be a real number, got str"):
         _spec(latency="1 ms")
+
+
+def test_significant_digits_decades_and_half_units_are_exact_at_every_power_of_ten():
+    """Every exact power of ten written, and the largest 5-digit value below each, gets its own decade's half unit:
+    at least the exact half unit (rational arithmetic), at most one ulp above it, whatever numpy's log10 and power
+    round to on this CPU."""
+    from fractions import Fraction
+
+    exps = np.arange(-290, 291)
+    at = np.array([float(f"1e{e}") for e in exps])
+    below = np.array([float(f"9.9999e{e - 1}") for e in exps])
+    spec = ErrorSpec(n_joints=2, sample_period=2e-4, torque_error=1.0, qd_max=1.0, qdd_max=1.0,
+                     significant_digits=5)
+    bound = spec.position_error(np.stack([at, below], axis=1))
+    for k, e in enumerate(exps):
+        for col, decade in ((0, int(e)), (1, int(e) - 1)):
+            half = Fraction(1, 2) * Fraction(10) ** (decade - 4)
+            got = float(bound[k, col])
+            assert Fraction(got) >= half, (e, col)
+            assert got <= np.nextafter(np.nextafter(float(half), np.inf), np.inf), (e, col)
