@@ -95,7 +95,7 @@ def run_error_spec(run_dir):
     times the tracking margins and the friction band of the shipped model's friction rows (a certified run on
     another model has its own in ``result.json``). Returns ``(ErrorSpec, dict)``.
     """
-    from h4bench.ident.processing.errorspec import ErrorSpec
+    from h4bench.ident.processing.errorspec import SPEC_ENTRIES, ErrorSpec
     from h4bench.scenarios import registry
     from h4bench.scenarios.certificate import simulated_error_spec
     from h4bench.trajectories.trajectory import Trajectory
@@ -106,6 +106,10 @@ def run_error_spec(run_dir):
     certified = {k: v for k, v in defaults["certified"].items() if k != "enabled"}
     if isinstance(result.get("error_model"), dict):
         table = {k: v for k, v in result["error_model"].items() if k != "n_joints" and v is not None}
+        if isinstance(table.get("sources"), dict):
+            # a certified run's sources also list what its equation assumed without proof (assembly mode, sin/cos,
+            # the fallback's factor): not entries of a specification; identify --spec lists its own again
+            table["sources"] = {k: v for k, v in table["sources"].items() if k in SPEC_ENTRIES}
         return ErrorSpec.from_mapping(table, 4, where=f"{run_dir / 'result.json'} error_model"), certified
     dataset = _load_dataset(run_dir)
     if not (run_dir / "trajectory.npz").is_file():

@@ -56,7 +56,7 @@ import numpy as np
 
 from h4bench.ident.validation import per_joint, positive
 
-__all__ = ["ErrorSpec", "ErrorSpecError"]
+__all__ = ["SPEC_ENTRIES", "ErrorSpec", "ErrorSpecError"]
 
 _PER_JOINT = ("position_resolution", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error",
               "friction_band")
@@ -84,6 +84,8 @@ _TIMING = ("hold", "sample")
 _KEYS = {"sample_period", "position_resolution", "counts_per_turn", "significant_digits", "position_rounding",
          "torque_timing", "latency", "torque_rate", "torque_error", "qd_max", "qdd_max", "model_error",
          "friction_band", "sources"}
+#: the entries an ``[error_model]`` table may hold (and its ``sources`` may name)
+SPEC_ENTRIES = frozenset(_KEYS)
 
 
 class ErrorSpecError(ValueError):
