@@ -31,7 +31,8 @@ import itertools
 import numpy as np
 
 from h4bench.ident.numerics.interval import U, up
-from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse, narrower
+from h4bench.ident.numerics.jets import (MR, Jet, SingularIntervalMatrix, SplitJet, ein, inverse, jet_ein, jet_inverse,
+                                        narrower, split_ein)
 
 __all__ = ["KrawczykFailure", "box_jets", "box_jets_started", "nacelle_jets", "point_jets", "pose_box"]
 
@@ -239,7 +240,6 @@ def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
     """
     if order not in (1, 2):
         raise ValueError(f"order must be 1 or 2, got {order!r}")
-    n = 2 * N_JOINTS
     X = pose_box(geometry, Q, x_hat)
     # everything that depends on q alone in the 4 variables q (a quarter of the Hessian entries), then padded
     x, jx_inv = _x_jet(geometry, Q, X, order, x_hat=x_hat, centred=CENTRED_ROUNDS if order == 2 else 0,
@@ -256,24 +256,26 @@ def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
     # d(Jq_i)/dt = u . (B_i' x AB) + u . (PB x AB') with B_i' = (u x PB) qd_i: the first term is qd_i times the
     # function of q alone u . ((u x PB) x AB), computed here in the 4 variables q
     su = jet_ein("...ik,ik->...i", _cross(ucross, ab), geometry.motor_axis)
-    ab, pb, dc, ucross, jinv, J, su = (j.pad(n) for j in (ab, pb, dc, ucross, jinv, J, su))
-    qd = Jet.variables(V, n, N_JOINTS, order)
-    xd = jet_ein("...ij,...j->...i", J, qd)
+    # from here on, functions of (q, qd) as split jets: the q-only ones have no qd blocks, the ones linear in qd no
+    # qd-qd block, and those exact zeros are skipped (jets.SplitJet)
+    ab, dc, ucross, jinv, J, su = (SplitJet.from_jet(j, N_JOINTS) for j in (ab, dc, ucross, jinv, J, su))
+    qd = SplitJet.w_variables(V, N_JOINTS, order)
+    xd = split_ein("...ij,...j->...i", J, qd)
     bd = ucross * qd[..., None]  # B_i's velocity
-    ezdc = Jet.stack([-dc[..., 1], dc[..., 0], Jet.constant(np.zeros(dc.shape[:-1]), like=dc[..., 0])])
+    ezdc = SplitJet.stack([-dc[..., 1], dc[..., 0], SplitJet(MR(np.zeros(dc.shape[:-1])), N_JOINTS, N_JOINTS, order)])
     dcd = ezdc * xd[..., 3][..., None, None]
     abd = bd - xd[..., None, :3] - dcd
-    jxd = Jet.stack([abd[..., 0], abd[..., 1], abd[..., 2],
-                     dcd[..., 0] * ab[..., 1] + dc[..., 0] * abd[..., 1] - dcd[..., 1] * ab[..., 0]
-                     - dc[..., 1] * abd[..., 0]])
-    jqd = su * qd + jet_ein("...ik,...ik->...i", ucross, abd)  # u . (PB x AB') = (u x PB) . AB
-    rhs = jqd[..., :, None] * np.eye(N_JOINTS) - jet_ein("...ij,...jk->...ik", jxd, J)
-    jd = jet_ein("...ij,...jk->...ik", jinv, rhs)
-    P = Jet.stack([jet_ein("...ai,...a->...i", J[..., :3, :], xd[..., :3]), J[..., 3, :] * xd[..., 3:4]])
-    F = Jet.stack([-jet_ein("...ai,...a->...i", jd[..., :3, :], xd[..., :3])
-                   - jet_ein("...ai,a->...i", J[..., :3, :], geometry.gravity),
-                   -(jd[..., 3, :] * xd[..., 3:4])])
-    return P, F
+    jxd = SplitJet.stack([abd[..., 0], abd[..., 1], abd[..., 2],
+                          dcd[..., 0] * ab[..., 1] + dc[..., 0] * abd[..., 1] - dcd[..., 1] * ab[..., 0]
+                          - dc[..., 1] * abd[..., 0]])
+    jqd = su * qd + split_ein("...ik,...ik->...i", ucross, abd)  # u . (PB x AB') = (u x PB) . AB
+    rhs = jqd[..., :, None] * np.eye(N_JOINTS) - split_ein("...ij,...jk->...ik", jxd, J)
+    jd = split_ein("...ij,...jk->...ik", jinv, rhs)
+    P = SplitJet.stack([split_ein("...ai,...a->...i", J[..., :3, :], xd[..., :3]), J[..., 3, :] * xd[..., 3:4]])
+    F = SplitJet.stack([-split_ein("...ai,...a->...i", jd[..., :3, :], xd[..., :3])
+                        - split_ein("...ai,a->...i", J[..., :3, :], geometry.gravity),
+                        -(jd[..., 3, :] * xd[..., 3:4])])
+    return P.to_jet(), F.to_jet()
 
 
 def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk: int = 2048):

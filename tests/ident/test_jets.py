@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from h4bench import sim
-from h4bench.ident.numerics.jets import MR, Jet, SingularIntervalMatrix, ein, inverse, jet_ein, jet_inverse
+from h4bench.ident.numerics.jets import (MR, Jet, SingularIntervalMatrix, SplitJet, ein, inverse, jet_ein, jet_inverse,
+                                        split_ein)
 from h4bench.ident.robots.h4_certified import nacelle_terms
 from h4bench.ident.robots.h4_jets import KrawczykFailure, box_jets, nacelle_jets, point_jets, pose_box
 from h4bench.sim.kinematics import forward_kinematics, inverse_kinematics
@@ -91,6 +92,75 @@ def test_jets_give_the_analytic_gradient_and_hessian():
         zz = z + rng.uniform(-0.01, 0.01, z.shape)
         assert np.all(box.v.contains(f(zz)))
         assert np.all(box.g.contains(f_jet(MR(zz), 1).g.c))
+
+
+def test_split_jets_give_the_analytic_derivatives_and_the_dense_jets_enclosures():
+    """f(y, w) = sum_i (A(y) w)_i w_i sin(y_0) + cos(y_1) (A(y) w)_0 - y_0 y_1, A(y) = [[y0, y0 y1], [y1, 2]]: a
+    function of y alone (A), one linear in w (A w) and their products, as split jets (zero blocks skipped) against
+    the analytic gradient and Hessian at points of the box (every one enclosed) and against the dense jets in the 4
+    variables (the same enclosures to rounding), on plain boxes and on Taylor models in tau."""
+    rng = np.random.default_rng(5)
+    S = 40
+    c = rng.uniform(-1, 1, size=(S, 4))
+    r = np.full((S, 4), 0.02)
+
+    def A_of(y0, y1, stack):
+        return stack([stack([y0, y1]), stack([y0 * y1, y0 * 0.0 + 2.0])])
+
+    def f_split(Y, W, order):
+        yj = Jet.variables(Y, 2, 0, order)
+        y0, y1 = yj[..., 0], yj[..., 1]
+        A = SplitJet.from_jet(A_of(y0, y1, Jet.stack), 2)
+        s0 = SplitJet.from_jet(y0.sin(), 2)
+        c1 = SplitJet.from_jet(y1.cos(), 2)
+        w = SplitJet.w_variables(W, 2, order)
+        Aw = split_ein("...ij,...j->...i", A, w)
+        return (split_ein("...i,...i->...", Aw, w) * s0 + c1 * Aw[..., 0]
+                - SplitJet.from_jet(y0 * y1, 2)).to_jet()
+
+    def f_dense(Y, W, order):
+        z = Jet.variables(MR.stack([Y[..., 0], Y[..., 1], W[..., 0], W[..., 1]]) if Y.a is None else
+                          MR(np.concatenate([Y.c, W.c], -1), np.concatenate([Y.r, W.r], -1),
+                             np.concatenate([Y.a, np.zeros_like(W.c)], -1)), 4, 0, order)
+        y0, y1, w = z[..., 0], z[..., 1], z[..., 2:]
+        Aw = jet_ein("...ij,...j->...i", A_of(y0, y1, Jet.stack), w)
+        return jet_ein("...i,...i->...", Aw, w) * y0.sin() + y1.cos() * Aw[..., 0] - y0 * y1
+
+    def f(p):
+        y0, y1, w0, w1 = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+        aw0, aw1 = y0 * w0 + y0 * y1 * w1, y1 * w0 + 2 * w1  # A's rows stacked on the last axis: columns
+        return (aw0 * w0 + aw1 * w1) * np.sin(y0) + np.cos(y1) * aw0 - y0 * y1
+
+    def grad_hess(p, d=1e-4):  # central differences of the analytic f (fourth order) as the derivative oracle
+        e = np.eye(4) * d
+        g = np.stack([(f(p - 2 * e[a]) - 8 * f(p - e[a]) + 8 * f(p + e[a]) - f(p + 2 * e[a])) / (12 * d)
+                      for a in range(4)], -1)
+        hs = np.stack([np.stack([(f(p + e[a] + e[b]) - f(p + e[a] - e[b]) - f(p - e[a] + e[b])
+                                  + f(p - e[a] - e[b])) / (4 * d * d) for b in range(4)], -1) for a in range(4)], -2)
+        return g, hs
+
+    for tau_part in (None, rng.uniform(-0.01, 0.01, size=(S, 2))):
+        Y = MR(c[:, :2], r[:, :2], tau_part)
+        W = MR(c[:, 2:], r[:, 2:])
+        split, dense = f_split(Y, W, 2), f_dense(Y, W, 2)
+        for a, b in ((split.v, dense.v), (split.g, dense.g), (split.h, dense.h)):
+            np.testing.assert_allclose(a.c, b.c, rtol=1e-13, atol=1e-13)
+            np.testing.assert_allclose(a.r, b.r, rtol=1e-6, atol=1e-13)
+        # a function linear in w has no w-w block (skipped, not computed), and y alone no w blocks at all
+        lin = split_ein("...ij,...j->...i", SplitJet.from_jet(Jet.variables(Y, 2, 0, 2), 2)[..., None, :] * 1.0,
+                        SplitJet.w_variables(W, 2, 2))
+        assert lin.hww is None and lin.hyw is not None and SplitJet.from_jet(Jet.variables(Y, 2, 0, 2), 2).gw is None
+        for _ in range(20):
+            t = rng.uniform(-1, 1, (S, 1))
+            p = c + rng.uniform(-1, 1, c.shape) * r
+            if tau_part is not None:
+                p[:, :2] += tau_part * t
+            g, hs = grad_hess(p)
+            assert np.all(split.v.untied().contains(f(p)))
+            assert np.all(split.g.untied().lo <= g + 1e-6) and np.all(g - 1e-6 <= split.g.untied().hi)
+            assert np.all(split.h.untied().lo <= hs + 1e-4) and np.all(hs - 1e-4 <= split.h.untied().hi)
+        pt = f_split(MR(c[:, :2]), MR(c[:, 2:]), 1)
+        assert pt.h is None and np.allclose(pt.g.c, grad_hess(c)[0], atol=1e-6)
 
 
 @pytest.fixture(scope="module")
