@@ -39,6 +39,7 @@ from h4bench.scenarios.spec import ScenarioError
 from h4bench.scenarios.threads import hull_processes
 
 __all__ = ["assumption_failures", "certify", "check_certificate", "processing_of", "simulated_error_spec",
+           "torque_error_acceleration",
            "verdict_lines"]
 
 _COLUMN_CHECKED = slice(0, 10)  # Imot1-4, Mnac, Ibc, Fv1-4
@@ -140,18 +141,32 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, t
     for key in ("motion_margin_qd", "motion_margin_qdd"):
         if not (np.isfinite(em[key]) and em[key] >= 1.0):
             raise ScenarioError(f"error_model.{key} must be a number >= 1 (a tracking margin), got {em[key]!r}")
+    factor = em.get("disturbance_factor_qdd", 0.0)
+    if isinstance(factor, bool) or not isinstance(factor, (int, float)) or not (np.isfinite(factor) and factor >= 0):
+        raise ScenarioError(f"error_model.disturbance_factor_qdd must be a number >= 0 (0: no torque-error term), "
+                            f"got {factor!r}")
     torque = float(em["torque_error"]) or float(noise_bound)
     rounding = not em["torque_error"] and tau_logged is not None
     if rounding:  # the applied torque's float sum (docstring)
         ulp = np.nextafter(2.0**-52 * (float(np.max(np.abs(tau_logged))) + torque), np.inf)
         torque = float(np.nextafter(torque + ulp, np.inf))
     qd = float(em["qd_max"]) or em["motion_margin_qd"] * np.abs(np.asarray(reference.qd)).max(axis=0)
-    qdd = float(em["qdd_max"]) or em["motion_margin_qdd"] * np.abs(np.asarray(reference.qdd)).max(axis=0)
     from h4bench.sim.friction import friction_band  # noqa: PLC0415
     from h4bench.sim.model import load_model  # noqa: PLC0415
 
+    model = load_model() if model is None else model
+    qdd, disturbance = float(em["qdd_max"]), None
+    if not qdd:
+        peak = np.abs(np.asarray(reference.qdd)).max(axis=0)
+        qdd = em["motion_margin_qdd"] * peak
+        if factor:
+            from h4bench import sim  # noqa: PLC0415
+
+            disturbance = torque_error_acceleration(sim.H4Geometry.from_model(model), reference.q, torque)
+            qdd = np.maximum(qdd, peak + factor * disturbance)
+
     fs_max = float(spec["prior"]["upper"])
-    band = friction_band(load_model() if model is None else model, qdd, fs_max)
+    band = friction_band(model, qdd, fs_max)
     sources = {
         "friction_band": (f"the simulator's friction law (MuJoCo's soft friction loss, sim.friction): Coulomb's "
                           f"Fs sign(qd) wherever |qd| >= (qdd_max + R Fs) / b, with b and R of its friction rows "
@@ -165,9 +180,14 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, t
                              if rounding else "")),
         "qd_max": (f"stated: {em['motion_margin_qd']:g} x the reference trajectory's peak |qd| per joint (tracking "
                    "margin), checked against the truth" if not em["qd_max"] else "stated in error_model.qd_max"),
-        "qdd_max": (f"stated: {em['motion_margin_qdd']:g} x the reference trajectory's peak |qdd| per joint "
-                    "(tracking margin), checked against the truth" if not em["qdd_max"] else
-                    "stated in error_model.qdd_max"),
+        "qdd_max": ("stated in error_model.qdd_max" if em["qdd_max"] else
+                    f"stated: {em['motion_margin_qdd']:g} x the reference trajectory's peak |qdd| per joint "
+                    "(tracking margin)" + ("" if disturbance is None else
+                                           f", or that peak plus {factor:g} x the torque error's acceleration "
+                                           "through the nominal inertia (max over the reference of "
+                                           "sum_j |M_nom(q)^-1|_ij x torque_error: "
+                                           + ", ".join(f"{v:.4g}" for v in disturbance) + " rad/s^2) if larger")
+                    + ", checked against the truth"),
         "model_error": (f"stated: {float(em['model_error']):g} N m in the scenario's [error_model] model_error "
                         "(0: the regressor is taken as the simulated robot's exact structure), checked against the "
                         "truth in the certificate's motion and total checks"),
@@ -175,6 +195,26 @@ def simulated_error_spec(spec: dict, reference, dt: float, noise_bound: float, t
     return ErrorSpec(n_joints=4, sample_period=float(dt), position_resolution=2 * np.pi / counts,
                      position_rounding="nearest", torque_timing="hold", torque_error=torque, qd_max=qd, qdd_max=qdd,
                      model_error=float(em["model_error"]), friction_band=band, sources=sources)
+
+
+def torque_error_acceleration(geometry, q, torque_error) -> np.ndarray:
+    """(4,) the acceleration a torque error of ``torque_error`` [N m] per motor gives each joint through the
+    NOMINAL inertia, at worst along the motion q (n, 4) [rad]: ``max_t sum_j |M(q_t)^-1|_ij torque_error``
+    [rad/s^2], with ``M = diag(Ia) + J^T diag(M, M, M, Mz) J`` of :data:`ident.NOMINAL_PARAMETERS` (what the
+    controller is designed on, never the truth; :func:`sim.axis_inertia` is its diagonal). Solved without LAPACK
+    (:func:`h4bench.portable.solve4`), so the same on every CPU. The torque error is disturbance the feedback
+    answers only after it acts: a statement of the motion bounds adds (a multiple of) it to the reference's
+    accelerations (:func:`simulated_error_spec`)."""
+    from h4bench.ident import NOMINAL_PARAMETERS  # noqa: PLC0415
+    from h4bench.portable import solve4  # noqa: PLC0415
+    from h4bench.sim.kinematics import jacobians  # noqa: PLC0415
+
+    theta = np.asarray(NOMINAL_PARAMETERS, dtype=float)
+    J = jacobians(geometry, np.atleast_2d(np.asarray(q, dtype=float))).J
+    mass = np.array([theta[4], theta[4], theta[4], theta[5]])
+    M = np.einsum("nai,a,naj->nij", J, mass, J) + np.diag(theta[:4])
+    inv = solve4(M, np.broadcast_to(np.eye(4), M.shape))
+    return np.abs(inv).sum(axis=2).max(axis=0) * float(torque_error)
 
 
 def processing_of(spec: dict) -> Processing:

@@ -23,10 +23,12 @@ DESCRIPTION = "the derived (certified) error model: interval equation from senso
 
 # [error_model]: 0 means "from the simulator's own settings" (counts_per_turn: encoder.counts_per_turn;
 # torque_error: the injected error's bound noise.bound) or, for qd_max / qdd_max, "stated from the reference
-# trajectory's peak times motion_margin_qd / motion_margin_qdd"
+# trajectory's peak times motion_margin_qd / motion_margin_qdd", qdd_max at least that peak plus
+# disturbance_factor_qdd times the torque error's acceleration through the nominal inertia (0: without it)
 SPEC_DEFAULTS = {
     "error_model": {"counts_per_turn": 0, "torque_error": 0.0, "qd_max": 0.0, "qdd_max": 0.0,
-                    "motion_margin_qd": 1.25, "motion_margin_qdd": 2.0, "model_error": 0.0},
+                    "motion_margin_qd": 1.25, "motion_margin_qdd": 2.0, "disturbance_factor_qdd": 2.0,
+                    "model_error": 0.0},
     # enabled: other kinds (the enclosure campaign, `h4bench run ... --error-model derived`) add the certified box
     "certified": {"kernel_steps": 0, "kernel_shape": "hann", "stride": 2, "curvature_every": 10,
                   "enabled": False},

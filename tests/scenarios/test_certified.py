@@ -338,3 +338,45 @@ def test_the_derived_torque_error_covers_the_float_sum_of_a_square_wave_at_its_b
     assert np.all(es.torque_error >= actual) and np.all(es.torque_error < bound * (1 + 1e-12))
     assert "float rounding" in es.sources["torque_error"]
     assert np.all(simulated_error_spec(spec, run_.reference, run_.dataset.dt, bound).torque_error == bound)
+
+
+def test_the_stated_qdd_max_adds_the_torque_errors_acceleration_through_the_nominal_inertia(run_and_spec):
+    """torque_error_acceleration against an independent construction (the diagonal is sim.axis_inertia at each
+    pose, the inverse numpy's LAPACK); the rule: a slow reference gets its peak plus twice that acceleration, the
+    scenario's own (fast) one its margin x peak; the truth's departure from the reference acceleration (MuJoCo's
+    closed loop under the injected torque error) stays within the added term; a bad factor is refused by name."""
+    from types import SimpleNamespace
+
+    from h4bench import ident, sim
+    from h4bench.scenarios.certificate import torque_error_acceleration
+    from h4bench.scenarios.spec import ScenarioError
+    from h4bench.sim.kinematics import forward_kinematics, jacobians
+
+    run_, spec = run_and_spec
+    ref, nominal = run_.reference, np.asarray(ident.NOMINAL_PARAMETERS)
+    q = ref.q[::25]
+    acc = torque_error_acceleration(run_.geometry, q, 1.3)
+    J = jacobians(run_.geometry, q).J
+    M = np.einsum("nai,naj->nij", J * np.array([nominal[4]] * 3 + [nominal[5]])[None, :, None], J)
+    M[:, np.arange(4), np.arange(4)] += nominal[:4]
+    x = np.atleast_2d(forward_kinematics(run_.geometry, q))
+    for k in (0, len(q) // 2):
+        np.testing.assert_allclose(np.diag(M[k]), sim.axis_inertia(run_.geometry, nominal, x[k]), rtol=1e-12)
+    np.testing.assert_allclose(acc, 1.3 * np.abs(np.linalg.inv(M)).sum(axis=2).max(axis=0), rtol=1e-10)
+
+    peak = np.abs(ref.qdd).max(axis=0)
+    full = torque_error_acceleration(run_.geometry, ref.q, run_.noise_bound)
+    es = simulated_error_spec(spec, ref, run_.dataset.dt, run_.noise_bound)
+    np.testing.assert_array_equal(es.qdd_max, 2.0 * peak)  # the fast reference: the margin is the larger
+    assert np.all(np.abs(run_.truth.qdd - ref.qdd[:len(run_.truth.qdd)]).max(axis=0) <= 2.0 * full)
+    slow = SimpleNamespace(q=ref.q, qd=ref.qd, qdd=ref.qdd / 10)
+    es = simulated_error_spec(spec, slow, run_.dataset.dt, run_.noise_bound)
+    np.testing.assert_allclose(es.qdd_max, peak / 10 + 2.0 * full, rtol=1e-15)
+    assert np.all(es.qdd_max > 2.0 * peak / 10) and "torque error's acceleration" in es.sources["qdd_max"]
+    off = copy.deepcopy(spec)
+    off["error_model"]["disturbance_factor_qdd"] = 0.0
+    np.testing.assert_array_equal(simulated_error_spec(off, slow, run_.dataset.dt, run_.noise_bound).qdd_max,
+                                  2.0 * peak / 10)
+    off["error_model"]["disturbance_factor_qdd"] = -1.0
+    with pytest.raises(ScenarioError, match="error_model.disturbance_factor_qdd must be a number >= 0"):
+        simulated_error_spec(off, slow, run_.dataset.dt, run_.noise_bound)
