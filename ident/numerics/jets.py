@@ -255,7 +255,19 @@ def inverse(m: MR) -> MR:
     return ein("...ij,...jk->...ik", inner, C)
 
 
-class Jet:
+class _Differences:
+    """``a - b`` as ``a + (-b)`` for a class with ``__add__`` and ``__neg__``."""
+
+    __slots__ = ()
+
+    def __sub__(self, other):
+        return self + (-other)
+
+    def __rsub__(self, other):
+        return (-self) + other
+
+
+class Jet(_Differences):
     """Value ``v`` (..., ), gradient ``g`` (..., n) and Hessian ``h`` (..., n, n) enclosures (:class:`MR`) over a
     box; ``order`` 0, 1 or 2 says which are tracked (the others are None)."""
 
@@ -323,12 +335,6 @@ class Jet:
                    None if self.h is None else self.h + other.h)
 
     __radd__ = __add__
-
-    def __sub__(self, other) -> Jet:
-        return self + (-other)
-
-    def __rsub__(self, other) -> Jet:
-        return (-self) + other
 
     def __mul__(self, other) -> Jet:
         """Elementwise product (numpy broadcasting of the value axes) with a jet, MR or float array."""
@@ -459,7 +465,7 @@ def _tighter(m1: MR, m2: MR) -> MR:
     return MR(np.where(first, m1.c, m2.c), np.where(first, m1.r, m2.r), a)
 
 
-class SplitJet:
+class SplitJet(_Differences):
     """A jet in two groups of variables ``z = (y, w)`` (m and k of them) whose derivative blocks that are exactly
     zero are neither stored nor computed (None): the value ``v`` (...), the gradient blocks ``gy`` (..., m) and
     ``gw`` (..., k), and for ``order`` 2 the Hessian blocks ``hyy`` (..., m, m), ``hyw`` (..., m, k) (``d^2 /
@@ -518,12 +524,6 @@ class SplitJet:
         return self._like(self.v + other.v, *(_sum([a, b]) for a, b in zip(self._blocks(), other._blocks())))
 
     __radd__ = __add__
-
-    def __sub__(self, other) -> SplitJet:
-        return self + (-other)
-
-    def __rsub__(self, other) -> SplitJet:
-        return (-self) + other
 
     def _as_jet(self, other) -> SplitJet:
         return other if isinstance(other, SplitJet) else self._like(_mr(other))
