@@ -32,5 +32,15 @@ for folder in LAYOUT["SUBPACKAGES"] + LAYOUT["DATA_PACKAGES"]:
 # gives the same bits; no fused multiply-add, so that it does
 FLAGS = ["/O2", "/fp:strict"] if sys.platform == "win32" else ["-O2", "-std=c++17", "-ffp-contract=off"]
 LOOP = Extension("h4bench.sim._loop", ["sim/_loop.cpp"], language="c++", extra_compile_args=FLAGS, optional=True)
+EXTENSIONS = [LOOP]
+# the interval arithmetic's fused ufuncs (ident/numerics/_mr.cpp; ident/numerics/fused.py): optional too, the numpy
+# formulas give the same bits; numpy's headers come from the build requirements (pyproject.toml)
+try:
+    import numpy
+except ImportError:  # a build without numpy: the numpy formulas alone
+    numpy = None
+if numpy is not None:
+    EXTENSIONS.append(Extension("h4bench.ident.numerics._mr", ["ident/numerics/_mr.cpp"], language="c++",
+                                include_dirs=[numpy.get_include()], extra_compile_args=FLAGS, optional=True))
 
-setup(packages=packages, package_dir=package_dir, ext_modules=[LOOP])
+setup(packages=packages, package_dir=package_dir, ext_modules=EXTENSIONS)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from h4bench.ident.numerics.fused import contract, contraction_views, extension
 from h4bench.ident.numerics.interval import U, up
 
 __all__ = ["LIBM_ULPS", "MR", "Jet", "SingularIntervalMatrix", "inverse"]
@@ -119,6 +120,15 @@ class MR:
 
     def __add__(self, other) -> MR:
         o = _mr(other)
+        ext = extension()
+        if ext is not None:  # the same formulas in one pass (ident.numerics.fused)
+            if self.a is None and o.a is None:
+                return MR(*ext.add_plain(self.c, self.r, o.c, o.r))
+            if self.a is not None and o.a is not None:
+                c, a, r = ext.add_tm(self.c, self.a, self.r, o.c, o.a, o.r)
+                return MR(c, r, a)
+            a = _plus(self.a, o.a)
+            return MR(*ext.add_tm1(self.c, self.r, o.c, o.r, a), a)
         c = self.c + o.c
         if self.a is None and o.a is None:
             return MR(c, (self.r + o.r + U * np.abs(c)) * _ONE + _TINY)
@@ -135,6 +145,9 @@ class MR:
 
     def __mul__(self, other) -> MR:
         o = _mr(other)
+        ext = extension()
+        if ext is not None:  # the same formulas in one pass (ident.numerics.fused)
+            return _fused_mul(ext, self, o)
         if o.a is None and not np.any(o.r):  # times an exact array (a constant): no radius of its own
             c = self.c * o.c
             a = None if self.a is None else self.a * o.c
@@ -182,6 +195,23 @@ class MR:
         return (self.lo <= x) & (x <= self.hi)
 
 
+def _fused_mul(ext, x: MR, o: MR) -> MR:
+    """:meth:`MR.__mul__` by the fused ufuncs (the same cases, formulas and bits)."""
+    if o.a is None and not np.any(o.r):
+        if x.a is None:
+            return MR(*ext.mul_const(x.c, x.r, o.c))
+        c, a, r = ext.mul_const_tm(x.c, x.a, x.r, o.c)
+    elif x.a is None and o.a is None:
+        return MR(*ext.mul_plain(x.c, x.r, o.c, o.r))
+    elif x.a is not None and o.a is not None:
+        c, a, r = ext.mul_tm(x.c, x.a, x.r, o.c, o.a, o.r)
+    elif o.a is None:
+        c, a, r = ext.mul_tm_left(x.c, x.a, x.r, o.c, o.r)
+    else:
+        c, a, r = ext.mul_tm_right(x.c, x.r, o.c, o.a, o.r)
+    return MR(c, r, a)
+
+
 def _plus(a, b):
     if a is None:
         return b
@@ -209,27 +239,20 @@ def _terms(spec: str, a_shape: tuple, b_shape: tuple) -> int:
 
 
 def ein(spec: str, a, b) -> MR:
-    """``einsum(spec, a, b)`` of two interval (or float) arrays or Taylor models, enclosed (any summation order)."""
+    """``einsum(spec, a, b)`` of two interval (or float) arrays or Taylor models, enclosed: the terms summed in
+    index order (:func:`ident.numerics.fused.contract`; the bound holds for any order)."""
     a, b = _mr(a), _mr(b)
     n = _terms(spec, a.shape, b.shape)
     g = _gamma(n)
     if a.a is None and b.a is None:
-        c = np.einsum(spec, a.c, b.c)
-        ab = np.abs(b.c)
-        # |a.c| (b.r + gamma |b.c|) + a.r (|b.c| + b.r): the operands' radii and the midpoint's rounding
-        r = np.einsum(spec, np.abs(a.c), b.r + g * ab)
-        if np.any(a.r):
-            r = r + np.einsum(spec, a.r, ab + b.r)
-        return MR(c, r * (1.0 + 3 * g) + _TINY)
-    a1 = np.zeros_like(a.c) if a.a is None else a.a
-    a2 = np.zeros_like(b.c) if b.a is None else b.a
-    aa = np.einsum(spec, a1, a2)
-    c = np.einsum(spec, a.c, b.c) + 0.5 * aa
-    lin = np.einsum(spec, a.c, a2) + np.einsum(spec, a1, b.c)
-    m1, m2 = np.abs(a.c) + np.abs(a1), np.abs(b.c) + np.abs(a2)
-    r = (np.einsum(spec, m1, b.r + 2 * g * m2) + np.einsum(spec, a.r, m2 + b.r)
-         + 0.5 * np.einsum(spec, np.abs(a1), np.abs(a2)))
-    return MR(c, r * (1.0 + 4 * g) + _TINY, lin)
+        (ac, ar), (bc, br) = contraction_views(spec, [a.c, a.r], [b.c, b.r])
+        return MR(*contract((ac, ar), (bc, br), g, taylor=False))
+    zero = np.zeros(())
+    a1 = np.broadcast_to(zero, a.c.shape) if a.a is None else a.a
+    a2 = np.broadcast_to(zero, b.c.shape) if b.a is None else b.a
+    va, vb = contraction_views(spec, [a.c, a1, a.r], [b.c, a2, b.r])
+    c, lin, r = contract(tuple(va), tuple(vb), g, taylor=True)
+    return MR(c, r, lin)
 
 
 def inverse(m: MR) -> MR:
