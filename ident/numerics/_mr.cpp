@@ -134,8 +134,10 @@ ELEMENTWISE(mul_tm_right, 8, {
 
 // sum_j of plain operands: (ac, ar, bc, br)(n), g () -> (c, r)
 //   c = sum ac bc;  r = (sum |ac| (br + g |bc|) + sum ar (|bc| + br)) (1 + 3 g) + TINY
-void contract_plain(char** args, const npy_intp* dims, const npy_intp* steps, void*) {
-  const npy_intp n = dims[1];
+// N > 0: a core axis of N (unrolled), else dims[1]; the first term assigned, the others added in index order.
+template <int N>
+void plain_sums(char** args, const npy_intp* dims, const npy_intp* steps) {
+  const npy_intp n = N > 0 ? N : dims[1];
   const npy_intp* core = steps + 7;  // core strides of the 4 inputs with a core axis
   for (npy_intp k = 0; k < dims[0]; ++k) {
     const double g = *reinterpret_cast<const double*>(args[4] + k * steps[4]);
@@ -164,8 +166,9 @@ void contract_plain(char** args, const npy_intp* dims, const npy_intp* steps, vo
 //   c = sum ac bc + 0.5 sum aa ba;  lin = sum ac ba + sum aa bc
 //   r = (sum m1 (br + 2 g m2) + sum ar (m2 + br) + 0.5 sum |aa| |ba|) (1 + 4 g) + TINY, m1 = |ac| + |aa|,
 //   m2 = |bc| + |ba|
-void contract_tm(char** args, const npy_intp* dims, const npy_intp* steps, void*) {
-  const npy_intp n = dims[1];
+template <int N>
+void tm_sums(char** args, const npy_intp* dims, const npy_intp* steps) {
+  const npy_intp n = N > 0 ? N : dims[1];
   const npy_intp* core = steps + 10;
   for (npy_intp k = 0; k < dims[0]; ++k) {
     const double g = *reinterpret_cast<const double*>(args[6] + k * steps[6]);
@@ -190,6 +193,21 @@ void contract_tm(char** args, const npy_intp* dims, const npy_intp* steps, void*
   }
 }
 
+// the core axes of the jets' contractions: 3 (vectors), 4 (joints) and 8 (variables) unrolled
+#define BY_SIZE(FN)                                   \
+  switch (dims[1]) {                                  \
+    case 1: return FN<1>(args, dims, steps);          \
+    case 2: return FN<2>(args, dims, steps);          \
+    case 3: return FN<3>(args, dims, steps);          \
+    case 4: return FN<4>(args, dims, steps);          \
+    case 8: return FN<8>(args, dims, steps);          \
+    default: return FN<0>(args, dims, steps);         \
+  }
+
+void contract_plain(char** args, const npy_intp* dims, const npy_intp* steps, void*) { BY_SIZE(plain_sums) }
+void contract_tm(char** args, const npy_intp* dims, const npy_intp* steps, void*) { BY_SIZE(tm_sums) }
+
+#undef BY_SIZE
 #undef CORE
 #undef OUTG
 
