@@ -16,9 +16,13 @@ import os
 
 import numpy as np
 
-__all__ = ["contract", "contraction_views", "extension"]
+from h4bench.ident.numerics.interval import U
+
+__all__ = ["ONE", "TINY", "contract", "contraction_views", "extension"]
 
 LAYOUT_VERSION = 1
+ONE = 1.0 + 16 * U  # covers the rounding of a radius formula of up to 6 nonnegative operations
+TINY = 1e-300  # an absolute allowance for underflow in every radius
 
 
 @functools.cache
@@ -31,10 +35,7 @@ def extension():
         from h4bench.ident.numerics import _mr  # noqa: PLC0415
     except ImportError:
         return None
-    from h4bench.ident.numerics.jets import _ONE, _TINY  # noqa: PLC0415
-    from h4bench.ident.numerics.interval import U  # noqa: PLC0415
-
-    if (_mr.LAYOUT_VERSION, _mr.U, _mr.ONE, _mr.TINY) != (LAYOUT_VERSION, U, _ONE, _TINY):
+    if (_mr.LAYOUT_VERSION, _mr.U, _mr.ONE, _mr.TINY) != (LAYOUT_VERSION, U, ONE, TINY):
         return None
     return _mr
 
@@ -98,8 +99,6 @@ def contract(a: tuple, b: tuple, g: float, taylor: bool):
 
 
 def _contract_numpy(a, b, g, taylor):
-    from h4bench.ident.numerics.jets import _TINY  # noqa: PLC0415
-
     n = np.broadcast_shapes(*(x.shape[-1:] for x in a + b))[0]
     if not taylor:
         ac, ar = a
@@ -109,7 +108,7 @@ def _contract_numpy(a, b, g, taylor):
             ay = np.abs(y)
             t, t1, t2 = x * y, np.abs(x) * (yr + g * ay), xr * (ay + yr)
             c, r1, r2 = (t, t1, t2) if j == 0 else (c + t, r1 + t1, r2 + t2)
-        return c, (r1 + r2) * (1.0 + 3 * g) + _TINY
+        return c, (r1 + r2) * (1.0 + 3 * g) + TINY
     ac, aa, ar = a
     bc, ba, br = b
     for j in range(n):
@@ -118,4 +117,4 @@ def _contract_numpy(a, b, g, taylor):
         terms = (x * y, xa * ya, x * ya, xa * y, m1 * (yr + 2 * g * m2), xr * (m2 + yr), np.abs(xa) * np.abs(ya))
         sums = terms if j == 0 else tuple(s + t for s, t in zip(sums, terms))
     cc, aa2, l1, l2, r1, r2, r3 = sums
-    return cc + 0.5 * aa2, l1 + l2, ((r1 + r2) + 0.5 * r3) * (1.0 + 4 * g) + _TINY
+    return cc + 0.5 * aa2, l1 + l2, ((r1 + r2) + 0.5 * r3) * (1.0 + 4 * g) + TINY

@@ -24,14 +24,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident.numerics.fused import contract, contraction_views, extension
+from h4bench.ident.numerics.fused import ONE, TINY, contract, contraction_views, extension
 from h4bench.ident.numerics.interval import U, up
 
 __all__ = ["LIBM_ULPS", "MR", "Jet", "SingularIntervalMatrix", "inverse"]
 
 LIBM_ULPS = 4  # stated accuracy of numpy's float64 sin / cos [ulp]
-_TINY = 1e-300
-_ONE = 1.0 + 16 * U  # covers the rounding of a radius formula of up to 6 nonnegative operations
+_TINY = TINY
+_ONE = ONE  # covers the rounding of a radius formula of up to 6 nonnegative operations
 
 
 class SingularIntervalMatrix(ArithmeticError):
