@@ -2,8 +2,8 @@
 pass per operation: fused numpy ufuncs from ``ident/numerics/_mr.cpp`` when the extension is built, the numpy
 formulas otherwise. Both give the same bits (the compiled loops evaluate the numpy formulas operation for operation
 on IEEE doubles, without fused multiply-add; ``tests/ident/test_fused_mr.py``), so a result does not depend on
-whether the extension was built: only the speed does. ``H4BENCH_PURE_PYTHON=1`` in the environment (read when this
-module is imported) forces the numpy formulas, as it forces the simulator's Python loop.
+whether the extension was built: only the speed does. ``H4BENCH_PURE_PYTHON=1`` in the environment (read at the
+first operation of a process) forces the numpy formulas, as it forces the simulator's Python loop.
 
 The contractions sum their terms in index order, k = 0 .. n - 1, in both paths (:func:`contract`); numpy's einsum
 is not used for them, so its choice of summation order (which may follow the CPU) cannot reach a result.

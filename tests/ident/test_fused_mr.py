@@ -5,6 +5,8 @@ operands' intervals, every tau of a Taylor model) and the spec forms it accepts 
 
 from __future__ import annotations
 
+import shutil
+import sys
 from fractions import Fraction
 
 import numpy as np
@@ -140,3 +142,15 @@ def test_the_h4_interval_jets_give_the_same_bits_with_and_without_the_extension(
         for f, s in zip(fast, slow):
             np.testing.assert_array_equal(f, s)
             assert f.tobytes() == s.tobytes()
+
+
+@pytest.mark.skipif(shutil.which("c++") is None or not sys.platform.startswith("linux"), reason="no C++ compiler")
+def test_the_fused_ufuncs_are_built_where_a_compiler_is(monkeypatch):
+    """An install on a machine with a C++ compiler builds the extension (its build is optional: a failure would
+    otherwise pass unseen, every certified run then taking the slower numpy formulas)."""
+    monkeypatch.delenv("H4BENCH_PURE_PYTHON", raising=False)
+    fused.extension.cache_clear()
+    try:
+        assert fused.extension() is not None, "h4bench.ident.numerics._mr was not built: see the install's output"
+    finally:
+        fused.extension.cache_clear()
