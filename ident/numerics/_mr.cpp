@@ -132,21 +132,23 @@ ELEMENTWISE(mul_tm_right, 8, {
 #define CORE(i, j) (*reinterpret_cast<const double*>(args[i] + k * steps[i] + (j) * core[i]))
 #define OUTG(i) (*reinterpret_cast<double*>(args[i] + k * steps[i]))
 
-// sum_j of plain operands: (ac, ar, bc, br)(n), g () -> (c, r)
-//   c = sum ac bc;  r = (sum |ac| (br + g |bc|) + sum ar (|bc| + br)) (1 + 3 g) + TINY
+// The contractions take each operand's per-element parts that do not depend on the other operand already formed
+// (ident/numerics/fused.py: the same expressions, so the same values), which halves the work per term.
+
+// sum_j of plain operands: (ac, |ac|, ar)(n), (bc, p1, p2)(n), g () -> (c, r), p1 = br + g |bc|, p2 = |bc| + br:
+//   c = sum ac bc;  r = (sum |ac| p1 + sum ar p2) (1 + 3 g) + TINY
 // N > 0: a core axis of N (unrolled), else dims[1]; the first term assigned, the others added in index order.
 template <int N>
 void plain_sums(char** args, const npy_intp* dims, const npy_intp* steps) {
   const npy_intp n = N > 0 ? N : dims[1];
-  const npy_intp* core = steps + 7;  // core strides of the 4 inputs with a core axis
+  const npy_intp* core = steps + 9;  // core strides of the 6 inputs with a core axis
   for (npy_intp k = 0; k < dims[0]; ++k) {
-    const double g = *reinterpret_cast<const double*>(args[4] + k * steps[4]);
+    const double g = *reinterpret_cast<const double*>(args[6] + k * steps[6]);
     double c = 0.0, r1 = 0.0, r2 = 0.0;
     for (npy_intp j = 0; j < n; ++j) {
-      const double ac = CORE(0, j), ar = CORE(1, j), bc = CORE(2, j), br = CORE(3, j);
-      const double t = ac * bc;
-      const double t1 = std::fabs(ac) * (br + g * std::fabs(bc));
-      const double t2 = ar * (std::fabs(bc) + br);
+      const double t = CORE(0, j) * CORE(3, j);
+      const double t1 = CORE(1, j) * CORE(4, j);
+      const double t2 = CORE(2, j) * CORE(5, j);
       if (j == 0) {
         c = t;
         r1 = t1;
@@ -157,29 +159,26 @@ void plain_sums(char** args, const npy_intp* dims, const npy_intp* steps) {
         r2 = r2 + t2;
       }
     }
-    OUTG(5) = c;
-    OUTG(6) = (r1 + r2) * (1.0 + 3 * g) + TINY;
+    OUTG(7) = c;
+    OUTG(8) = (r1 + r2) * (1.0 + 3 * g) + TINY;
   }
 }
 
-// sum_j of Taylor models: (ac, aa, ar, bc, ba, br)(n), g () -> (c, lin, r)
+// sum_j of Taylor models: (ac, aa, ar, m1, |aa|)(n), (bc, ba, q1, q2, |ba|)(n), g () -> (c, lin, r), with
+// m1 = |ac| + |aa|, m2 = |bc| + |ba|, q1 = br + 2 g m2, q2 = m2 + br:
 //   c = sum ac bc + 0.5 sum aa ba;  lin = sum ac ba + sum aa bc
-//   r = (sum m1 (br + 2 g m2) + sum ar (m2 + br) + 0.5 sum |aa| |ba|) (1 + 4 g) + TINY, m1 = |ac| + |aa|,
-//   m2 = |bc| + |ba|
+//   r = (sum m1 q1 + sum ar q2 + 0.5 sum |aa| |ba|) (1 + 4 g) + TINY
 template <int N>
 void tm_sums(char** args, const npy_intp* dims, const npy_intp* steps) {
   const npy_intp n = N > 0 ? N : dims[1];
-  const npy_intp* core = steps + 10;
+  const npy_intp* core = steps + 14;
   for (npy_intp k = 0; k < dims[0]; ++k) {
-    const double g = *reinterpret_cast<const double*>(args[6] + k * steps[6]);
+    const double g = *reinterpret_cast<const double*>(args[10] + k * steps[10]);
     double cc = 0.0, aa2 = 0.0, l1 = 0.0, l2 = 0.0, r1 = 0.0, r2 = 0.0, r3 = 0.0;
     for (npy_intp j = 0; j < n; ++j) {
-      const double ac = CORE(0, j), aa = CORE(1, j), ar = CORE(2, j), bc = CORE(3, j), ba = CORE(4, j),
-                   br = CORE(5, j);
-      const double m1 = std::fabs(ac) + std::fabs(aa);
-      const double m2 = std::fabs(bc) + std::fabs(ba);
+      const double ac = CORE(0, j), aa = CORE(1, j), bc = CORE(5, j), ba = CORE(6, j);
       const double t_cc = ac * bc, t_aa = aa * ba, t_l1 = ac * ba, t_l2 = aa * bc;
-      const double t_r1 = m1 * (br + 2 * g * m2), t_r2 = ar * (m2 + br), t_r3 = std::fabs(aa) * std::fabs(ba);
+      const double t_r1 = CORE(3, j) * CORE(7, j), t_r2 = CORE(2, j) * CORE(8, j), t_r3 = CORE(4, j) * CORE(9, j);
       if (j == 0) {
         cc = t_cc; aa2 = t_aa; l1 = t_l1; l2 = t_l2; r1 = t_r1; r2 = t_r2; r3 = t_r3;
       } else {
@@ -187,9 +186,9 @@ void tm_sums(char** args, const npy_intp* dims, const npy_intp* steps) {
         r3 = r3 + t_r3;
       }
     }
-    OUTG(7) = cc + 0.5 * aa2;
-    OUTG(8) = l1 + l2;
-    OUTG(9) = ((r1 + r2) + 0.5 * r3) * (1.0 + 4 * g) + TINY;
+    OUTG(11) = cc + 0.5 * aa2;
+    OUTG(12) = l1 + l2;
+    OUTG(13) = ((r1 + r2) + 0.5 * r3) * (1.0 + 4 * g) + TINY;
   }
 }
 
@@ -228,8 +227,8 @@ const Def DEFS[] = {
     {"mul_tm", mul_tm, 6, 3, nullptr},
     {"mul_tm_left", mul_tm_left, 5, 3, nullptr},
     {"mul_tm_right", mul_tm_right, 5, 3, nullptr},
-    {"contract_plain", contract_plain, 5, 2, "(n),(n),(n),(n),()->(),()"},
-    {"contract_tm", contract_tm, 7, 3, "(n),(n),(n),(n),(n),(n),()->(),(),()"},
+    {"contract_plain", contract_plain, 7, 2, "(n),(n),(n),(n),(n),(n),()->(),()"},
+    {"contract_tm", contract_tm, 11, 3, "(n),(n),(n),(n),(n),(n),(n),(n),(n),(n),()->(),(),()"},
 };
 const int NDEFS = sizeof(DEFS) / sizeof(DEFS[0]);
 
@@ -262,7 +261,7 @@ PyMODINIT_FUNC PyInit__mr(void) {
       return nullptr;
     }
   }
-  if (PyModule_AddIntConstant(m, "LAYOUT_VERSION", 1) < 0 || PyModule_AddObject(m, "U", PyFloat_FromDouble(U)) < 0 ||
+  if (PyModule_AddIntConstant(m, "LAYOUT_VERSION", 2) < 0 || PyModule_AddObject(m, "U", PyFloat_FromDouble(U)) < 0 ||
       PyModule_AddObject(m, "ONE", PyFloat_FromDouble(ONE)) < 0 ||
       PyModule_AddObject(m, "TINY", PyFloat_FromDouble(TINY)) < 0) {
     Py_DECREF(m);

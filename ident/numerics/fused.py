@@ -20,7 +20,7 @@ from h4bench.ident.numerics.interval import U
 
 __all__ = ["ONE", "TINY", "contract", "contraction_views", "extension"]
 
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 ONE = 1.0 + 16 * U  # covers the rounding of a radius formula of up to 6 nonnegative operations
 TINY = 1e-300  # an absolute allowance for underflow in every radius
 
@@ -90,31 +90,35 @@ def contract(a: tuple, b: tuple, g: float, taylor: bool):
     Taylor models: a = (ac, aa, ar), b = (bc, ba, br); returns (c, lin, r) with ``c = sum ac bc + sum aa ba / 2``,
     ``lin = sum ac ba + sum aa bc`` and ``r = (sum m1 (br + 2 g m2) + sum ar (m2 + br) + sum |aa| |ba| / 2)
     (1 + 4 g) + 1e-300`` (m1 = |ac| + |aa|, m2 = |bc| + |ba|). g: the rounding factor of n-term sums
-    (:func:`ident.numerics.jets.ein`)."""
-    ext = extension()
+    (:func:`ident.numerics.jets.ein`). Each operand's own factors (``|ac|``, ``br + g |bc|``, m1, ...) are formed
+    once, before the sums, by the same expressions in both paths."""
     g = np.float64(g)
+    if not taylor:
+        (ac, ar), (bc, br) = a, b
+        abc = np.abs(bc)
+        parts = (ac, np.abs(ac), ar), (bc, br + g * abc, abc + br)
+    else:
+        (ac, aa, ar), (bc, ba, br) = a, b
+        absaa, absba = np.abs(aa), np.abs(ba)
+        m2 = np.abs(bc) + absba
+        parts = (ac, aa, ar, np.abs(ac) + absaa, absaa), (bc, ba, br + 2 * g * m2, m2 + br, absba)
+    ext = extension()
     if ext is not None:
-        return (ext.contract_tm if taylor else ext.contract_plain)(*a, *b, g)
-    return _contract_numpy(a, b, g, taylor)
+        return (ext.contract_tm if taylor else ext.contract_plain)(*parts[0], *parts[1], g)
+    return _contract_numpy(parts[0], parts[1], g, taylor)
 
 
 def _contract_numpy(a, b, g, taylor):
     n = np.broadcast_shapes(*(x.shape[-1:] for x in a + b))[0]
     if not taylor:
-        ac, ar = a
-        bc, br = b
         for j in range(n):
-            x, xr, y, yr = ac[..., j], ar[..., j], bc[..., j], br[..., j]
-            ay = np.abs(y)
-            t, t1, t2 = x * y, np.abs(x) * (yr + g * ay), xr * (ay + yr)
+            (x, xa, xr), (y, p1, p2) = ([m[..., j] for m in a], [m[..., j] for m in b])
+            t, t1, t2 = x * y, xa * p1, xr * p2
             c, r1, r2 = (t, t1, t2) if j == 0 else (c + t, r1 + t1, r2 + t2)
         return c, (r1 + r2) * (1.0 + 3 * g) + TINY
-    ac, aa, ar = a
-    bc, ba, br = b
     for j in range(n):
-        x, xa, xr, y, ya, yr = (m[..., j] for m in (ac, aa, ar, bc, ba, br))
-        m1, m2 = np.abs(x) + np.abs(xa), np.abs(y) + np.abs(ya)
-        terms = (x * y, xa * ya, x * ya, xa * y, m1 * (yr + 2 * g * m2), xr * (m2 + yr), np.abs(xa) * np.abs(ya))
+        (x, xa, xr, m1, axa), (y, ya, q1, q2, aya) = ([m[..., j] for m in a], [m[..., j] for m in b])
+        terms = (x * y, xa * ya, x * ya, xa * y, m1 * q1, xr * q2, axa * aya)
         sums = terms if j == 0 else tuple(s + t for s, t in zip(sums, terms))
     cc, aa2, l1, l2, r1, r2, r3 = sums
     return cc + 0.5 * aa2, l1 + l2, ((r1 + r2) + 0.5 * r3) * (1.0 + 4 * g) + TINY
