@@ -8,7 +8,7 @@ certified box's width over the prior's, per parameter, and how many parameters s
 (``--counts N`` simulates an encoder of N counts per turn instead of the scenario's 20000, e.g. 4096).
 
     python benchmarks/bench_certified_stage.py [--full] [--seeds 0,1,2] [--counts 4096] [--processes 1,2]
-        [--out F.json]
+        [--encoder-jets auto|box|tube] [--out F.json]
 
 Measured on a loaded 2-core machine (medians over seeds 0-2, quick), the code at 7b00d11 then at 621b7b6:
 (equation + certificate) / simulation 80.4 -> 55.3 (equation 13.3 -> 14.0 s, certificate 9.15 -> 1.56 s,
@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 
-def one(seed: int, quick: bool, counts: int = 0, processes=(1,)) -> list[dict]:
+def one(seed: int, quick: bool, counts: int = 0, processes=(1,), encoder_jets: str = "") -> list[dict]:
     """One experiment, certified once per entry of ``processes`` (``H4BENCH_HULL_PROCESSES``)."""
     from h4bench.scenarios.experiment import run_experiment
     from h4bench.scenarios.registry import load_spec
@@ -59,6 +59,8 @@ def one(seed: int, quick: bool, counts: int = 0, processes=(1,)) -> list[dict]:
     spec = load_spec("certified", quick=quick)
     if counts:
         spec["encoder"]["counts_per_turn"] = counts
+    if encoder_jets:
+        spec["certified"]["encoder_jets"] = encoder_jets
     run_ = run_experiment(spec, seed)
     out = []
     for p in processes:
@@ -92,6 +94,8 @@ def main() -> None:
     ap.add_argument("--full", action="store_true")
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--counts", type=int, default=0, help="encoder counts per turn (0: the scenario's)")
+    ap.add_argument("--encoder-jets", default="", help="[certified] encoder_jets (auto, box, tube; default the "
+                    "scenario's)")
     ap.add_argument("--out", default=None)
     ap.add_argument("--processes", default="1,2",
                     help="the certified stage's processes (H4BENCH_HULL_PROCESSES), each measured on every seed")
@@ -100,7 +104,7 @@ def main() -> None:
     procs = [int(x) for x in a.processes.split(",")]
     rows = []
     for s in (int(x) for x in a.seeds.split(",")):
-        for r in one(s, not a.full, a.counts, procs):
+        for r in one(s, not a.full, a.counts, procs, a.encoder_jets):
             rows.append(r)
             _print(r)
     for p in procs:

@@ -222,7 +222,8 @@ def processing_of(spec: dict) -> Processing:
     c = spec["certified"]
     try:  # kernel_steps 0: every kernel of the family (ident.processing.choice)
         return Processing(kernel_steps=int(c["kernel_steps"]) or None, kernel_shape=str(c["kernel_shape"]),
-                          stride=int(c["stride"]), curvature_every=int(c["curvature_every"]))
+                          stride=int(c["stride"]), curvature_every=int(c["curvature_every"]),
+                          encoder_jets=str(c.get("encoder_jets", "auto")))
     except (TypeError, ValueError) as exc:
         raise ScenarioError(f"[certified] {exc}") from None
 

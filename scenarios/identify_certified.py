@@ -31,13 +31,15 @@ from h4bench.scenarios.threads import hull_processes
 
 __all__ = ["identify_certified_csv", "read_processing"]
 
-_PROCESSING_KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "curvature_every": int}
+_PROCESSING_KEYS = {"kernel_steps": int, "kernel_shape": str, "stride": int, "curvature_every": int,
+                    "encoder_jets": str}
 
 
 def read_processing(path) -> Processing:
     """The optional ``[certified]`` table of a spec file: ``kernel_steps`` (>= ``MIN_KERNEL_STEPS``; 0 or absent: the
     rows of every kernel of :func:`ident.processing.choice.kernel_family`),
-    ``kernel_shape`` (``hann`` or ``triangle``), ``stride`` and ``curvature_every`` (>= 1). Errors name ``--spec``,
+    ``kernel_shape`` (``hann`` or ``triangle``), ``stride`` and ``curvature_every`` (>= 1), ``encoder_jets``
+    (``auto``, ``box`` or ``tube``: :data:`ident.robots.h4_certified.ENCODER_JETS`). Errors name ``--spec``,
     the file and the key."""
     from h4bench.scenarios.identify import OptionError
 

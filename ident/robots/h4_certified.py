@@ -39,9 +39,14 @@ from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
 from h4bench.ident.robots.h4_jets import box_jets_started, point_jets
 
-__all__ = ["CURVATURE_FACTOR", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps", "MotionBounds", "Processing", "certified_equation",
+__all__ = ["CURVATURE_FACTOR", "ENCODER_JETS", "encoder_from_tube", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps", "MotionBounds", "Processing", "certified_equation",
            "certified_rows", "certified_steps", "curvature_bounds", "nacelle_terms", "stated_assumptions"]
 
+#: where each step's encoder-box bounds (the encoder's second-order term and the gradients' transfer to the true
+#: state) come from: ``"box"`` interval jets over the encoder box itself, ``"tube"`` those of the step's motion tube
+#: (which holds the encoder box: valid, a little wider, one evaluation instead of two), ``"auto"`` the tube's on the
+#: steps where :func:`encoder_from_tube` says the position error is small against the motion, the box's elsewhere
+ENCODER_JETS = ("auto", "box", "tube")
 CURVATURE_FACTOR = 2.0  # stated factor on the sampled second-derivative maxima (not proven; see module docstring)
 N_JOINTS = 4
 # What the derived equation states without proving it (module docstring), entry -> source
@@ -56,12 +61,14 @@ STATED = {
 class Processing:
     """The weak form's processing settings (a scenario's ``[certified]`` table): kernel length in sample steps
     (None: every kernel of :func:`ident.processing.choice.kernel_family`, rows stacked), its shape, the stride
-    between rows [samples] and the sampling of the curvature bounds [steps]."""
+    between rows [samples], the sampling of the curvature bounds [steps] and where the encoder's derivative
+    bounds come from (``encoder_jets``, :data:`ENCODER_JETS`: ``"auto"`` applies :func:`encoder_from_tube`)."""
 
     kernel_steps: int | None = None
     kernel_shape: str = "hann"
     stride: int = 2
     curvature_every: int = 10
+    encoder_jets: str = "auto"
 
     def __post_init__(self) -> None:
         from h4bench.ident.processing.weakform import KERNEL_SHAPES  # noqa: PLC0415
@@ -74,6 +81,8 @@ class Processing:
             check_kernel_steps(self.kernel_steps)
         if self.kernel_shape not in KERNEL_SHAPES:
             raise ValueError(f"kernel_shape must be one of {KERNEL_SHAPES}, got {self.kernel_shape!r}")
+        if self.encoder_jets not in ENCODER_JETS:
+            raise ValueError(f"encoder_jets must be one of {ENCODER_JETS}, got {self.encoder_jets!r}")
 
 
 @dataclass(frozen=True)
@@ -129,6 +138,19 @@ def stated_assumptions(info: dict) -> dict:
     for i, what in enumerate(info.get("not_proven", []), start=1):
         out[f"not_proven_{i}"] = f"stated, not proven: {what}"
     return out
+
+
+def encoder_from_tube(ev, qdd_max, h: float) -> np.ndarray:
+    """(S,) the steps whose encoder-box bounds ``"auto"`` takes from the motion tube's interval jets: those where on
+    every joint the encoder's speed error ``ev`` (S, n_j) [rad/s] (the secant's, ``(e_j + e_j+1) / h``) is at most
+    the motion's own ``qdd_max h / 2``, the tube's speed allowance beyond it. There the position error is small
+    against the motion within a step: its terms are a small part of the rows, and bounding them over the tube (2-8 %
+    wider on ``certified --quick``) changes the box by well under 1 % (docs/guarantee.md), while the second
+    evaluation would cost as much as the tube's. Elsewhere (a coarse encoder, a slow motion) the encoder's terms
+    weigh, and their own box's tighter bounds are worth their time. Reads the specification and the measured
+    positions only."""
+    allowance = np.asarray(qdd_max, dtype=float) * (h / 2)
+    return np.all(np.asarray(ev, dtype=float) <= allowance, axis=-1)
 
 
 def nacelle_terms(geometry, q, qd, x=None, x0=None):
@@ -229,7 +251,8 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     eq = eqs[0] if processing.kernel_steps is not None else stack_family(
         eqs, family, kernel_steps=None, kernel_l1=max(e.info["kernel_l1"] for e in eqs))
     eq.info.update(kernel_shape=processing.kernel_shape, stride=processing.stride,
-                   curvature_every=processing.curvature_every)
+                   curvature_every=processing.curvature_every, encoder_jets=processing.encoder_jets,
+                   encoder_boxes_from_tube=steps.encoder_from_tube)
     if len(eq) <= len(PARAMETER_NAMES):
         raise ValueError(f"the log gives {len(eq)} rows ({eq.info['windows']} kernel windows, 4 joints), which must "
                          f"exceed the {len(PARAMETER_NAMES)} parameters: a longer log or a smaller stride")
@@ -249,6 +272,7 @@ class CertifiedSteps:
     proven: np.ndarray
     proven_motion: np.ndarray
     motion: MotionBounds | None = None
+    encoder_from_tube: int = 0
 
 
 def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, position_error=None,
@@ -297,9 +321,11 @@ def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, posit
     # * the motion tube: q_m + (v h / 2) tau +- (e_m + e_v h / 2 + qdd_max h^2 / 8) for tau in [-1, 1] (a Taylor
     #   model in tau), v +- (e_v + qdd_max h / 2): every true state of the step and every point between it and
     #   the true secant state (chord remainder qdd_max h^2 / 8, speed within qdd_max h / 2 of the secant's).
-    # (The encoder box lies in the motion tube, so the tube's jets would bound it too, in about half the time of
-    # the two evaluations; but over the tube the encoder's bounds are 2-5 times wider at 20000 counts per turn
-    # (width/tuned 0.9641 -> 0.9717 on certified --quick seed 0) and 3 more parameters stay at the prior at 4096.)
+    # The encoder box lies in the motion tube, so the tube's jets bound it too, in one evaluation instead of two
+    # (Processing.encoder_jets: "auto" does so where encoder_from_tube says the position error is small against the
+    # motion). On certified --quick seeds 0-2 at 20000 counts per turn the equation then takes 0.7x the time and the
+    # box is 0.7-1.1 % wider (width/tuned 1.0103 / 1.1641 / 1.0657 -> 1.0175 / 1.1766 / 1.0735); at 4096 counts the
+    # tube's bounds would leave 6 parameters at the prior instead of 4, and "auto" keeps the encoder box's there.
     u = 2.0**-53
     qddm = np.asarray(spec.qdd_max, dtype=float)
     em, ev = up(0.5 * (e[:-1] + e[1:])), up((e[:-1] + e[1:]) / h)
@@ -308,11 +334,19 @@ def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, posit
     a_tube = vm * (h / 2)
     q_tube = MR(qm, up(em_box + up(ev_box * (h / 2)) + up(qddm * (h * h / 8)) + 4 * u * np.abs(a_tube)), a_tube)
     v_tube = MR(vm, up(ev_box + up(qddm * (h / 2))))
+    # the steps whose encoder bounds come from their tube's jets (Processing.encoder_jets), the others' from their
+    # encoder box's own
+    from_tube = {"box": np.zeros(qm.shape[0], dtype=bool), "tube": np.ones(qm.shape[0], dtype=bool),
+                 "auto": encoder_from_tube(ev_box, qddm, h)}[processing.encoder_jets] & bool(np.any(e))
     motion_done = _motion_jets(geometry, q_tube, v_tube, pose, motion, pool)
-    encoder_done = box_jets_started(geometry, MR(qm, em_box), MR(vm, ev_box), pose, pool) if np.any(e) else None
-    HPm, HFm, proven_m = motion_done()
-    if encoder_done is not None:
-        GP, HP, GF, HF, proven = encoder_done()
+    own = np.flatnonzero(~from_tube) if np.any(e) else np.zeros(0, dtype=np.int64)
+    encoder_done = box_jets_started(geometry, MR(qm, em_box)[own], MR(vm, ev_box)[own], pose[own], pool) \
+        if own.size else None
+    GPm, HPm, GFm, HFm, proven_m = motion_done()
+    if np.any(e):  # the encoder box lies in the tube (its radii are the box's plus the motion's): the tube's bounds hold
+        GP, HP, GF, HF, proven = GPm.copy(), HPm.copy(), GFm.copy(), HFm.copy(), proven_m.copy()
+        if encoder_done is not None:
+            GP[own], HP[own], GF[own], HF[own], proven[own] = encoder_done()
     else:  # exact positions (the certificate's truth equation): no encoder term, nothing to bound
         GP, GF = np.full((qm.shape[0], 4, 2, 8), np.inf), np.full((qm.shape[0], 4, 2, 8), np.inf)
         HP, HF = np.zeros((qm.shape[0], 4, 2, 8, 8)), np.zeros((qm.shape[0], 4, 2, 8, 8))
@@ -328,30 +362,27 @@ def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, posit
     nonlinear = nonlinear_steps(evaluate, q, e, h, spec.qd_max, spec.qdd_max, (HPm, HFm), encoder=(HP, HF, GP, GF))
     bounds = MotionBounds(q_tube=q_tube, v_tube=v_tube, HP=HPm, HF=HFm, proven=proven_m)
     return CertifiedSteps(q=q, e=e, spec=spec, nonlinear=nonlinear, proven=proven, proven_motion=proven_m,
-                          motion=bounds)
+                          motion=bounds, encoder_from_tube=int(from_tube.sum()))
 
 
 def _motion_jets(geometry, q_tube: MR, v_tube: MR, pose, motion: MotionBounds | None, pool=None):
-    """A function returning (HP, HF, proven) over the motion tubes (S, 4): ``motion``'s bounds on the steps whose
-    tubes it covers, the interval jets (:func:`ident.robots.h4_jets.box_jets`) on the others, the later half of
-    their chunks begun in ``pool`` now (:func:`ident.robots.h4_jets.box_jets_started`)."""
+    """A function returning (GP, HP, GF, HF, proven) over the motion tubes (S, 4): ``motion``'s bounds on the steps
+    whose tubes it covers (it holds no gradient bounds: GP, GF infinite there), the interval jets
+    (:func:`ident.robots.h4_jets.box_jets`) on the others, the later half of their chunks begun in ``pool`` now
+    (:func:`ident.robots.h4_jets.box_jets_started`)."""
     reuse = np.zeros(q_tube.shape[0], dtype=bool) if motion is None else motion.covers(q_tube, v_tube)
     if not reuse.any():
-        started = box_jets_started(geometry, q_tube, v_tube, pose, pool)
-
-        def whole():
-            _, HP, _, HF, proven = started()
-            return HP, HF, proven
-
-        return whole
+        return box_jets_started(geometry, q_tube, v_tube, pose, pool)
     todo = np.flatnonzero(~reuse)
     started = box_jets_started(geometry, q_tube[todo], v_tube[todo], pose[todo], pool) if todo.size else None
 
     def merged():
+        S = q_tube.shape[0]
+        GP, GF = np.full((S, 4, 2, 8), np.inf), np.full((S, 4, 2, 8), np.inf)
         HP, HF, proven = motion.HP.copy(), motion.HF.copy(), reuse.copy()
         if started is not None:
-            _, HP[todo], _, HF[todo], proven[todo] = started()
-        return HP, HF, proven
+            GP[todo], HP[todo], GF[todo], HF[todo], proven[todo] = started()
+        return GP, HP, GF, HF, proven
 
     return merged
 

@@ -31,7 +31,7 @@ SPEC_DEFAULTS = {
                     "model_error": 0.0},
     # enabled: other kinds (the enclosure campaign, `h4bench run ... --error-model derived`) add the certified box
     "certified": {"kernel_steps": 0, "kernel_shape": "hann", "stride": 2, "curvature_every": 10,
-                  "enabled": False},
+                  "encoder_jets": "auto", "enabled": False},
 }
 
 

@@ -144,3 +144,56 @@ def test_nonlinear_rows_any_chunk_and_a_loop_oracle(geometry):
         first = np.einsum("uica,ua->ic", np.abs(g), st.e[j0:j0 + 41])
         assert np.all(meas[r] >= first * (1 - 1e-12))  # the radius holds the plain first-order term
         assert np.all(meas[r] <= first * 1.5 + 1e-9)  # and not much more (radii of the enclosures, rounding)
+
+
+def test_encoder_from_tube_rule():
+    """``"auto"`` takes a step's encoder bounds from its tube where, on every joint, the encoder's speed error is at
+    most the motion's ``qdd_max h / 2``."""
+    from h4bench.ident.robots.h4_certified import encoder_from_tube
+
+    h, qdd = 1e-3, np.array([600.0, 800.0, 1000.0, 1200.0])
+    ev = np.array([[0.3, 0.4, 0.5, 0.6],     # each exactly at qdd h / 2
+                   [0.2, 0.2, 0.2, 0.2],     # below everywhere
+                   [0.2, 0.2, 0.2, 0.61],    # one joint above
+                   [1.53, 1.53, 1.53, 1.53]])  # a 4 096-count encoder
+    np.testing.assert_array_equal(encoder_from_tube(ev, qdd, h), [True, True, False, False])
+    with pytest.raises(ValueError, match="encoder_jets must be one of"):
+        Processing(encoder_jets="sampled")
+
+
+def test_encoder_bounds_from_the_tube_hold_over_the_encoder_box(geometry):
+    """``encoder_jets = "tube"``: every step's encoder bounds are its motion tube's (one evaluation); they hold at
+    random states of the encoder box (the oracle: central differences of the enclosed point gradients); ``"auto"``
+    gives the bits of ``"box"`` where the stated qdd_max is small against the encoder's speed error and those of
+    ``"tube"`` where it is large."""
+    from h4bench.ident.robots.h4_certified import certified_equation
+
+    q_true, q_meas, res = _log(geometry)
+    spec = _spec(res, q_true)  # qdd_max a few rad/s^2: qdd_max h / 2 far below the encoder's 2 e / h = 0.31 rad/s
+    h, S = spec.sample_period, q_meas.shape[0] - 1
+    tube = certified_steps(geometry, q_meas, spec, Processing(encoder_jets="tube"))
+    assert tube.encoder_from_tube == S and tube.proven.all()
+    rng = np.random.default_rng(11)
+    steps = np.arange(0, S, 5)
+    e = spec.position_error(q_meas)
+    qm, vm = 0.5 * (q_meas[:-1] + q_meas[1:]), np.diff(q_meas, axis=0) / h
+    em, ev = 0.5 * (e[:-1] + e[1:]), (e[:-1] + e[1:]) / h
+    for _ in range(3):
+        zq = qm[steps] + rng.uniform(-1, 1, (steps.size, 4)) * em[steps]
+        zv = vm[steps] + rng.uniform(-1, 1, (steps.size, 4)) * ev[steps]
+        assert_hessians_within(geometry, zq, zv, tube.motion.HP[steps], tube.motion.HF[steps])
+    tau = rng.normal(size=q_meas.shape)
+    eqs = {m: certified_equation(geometry, q_meas, tau, spec, Processing(kernel_steps=40, encoder_jets=m))
+           for m in ("auto", "box", "tube")}
+    assert eqs["auto"].info["encoder_boxes_from_tube"] == 0 and eqs["tube"].info["encoder_boxes_from_tube"] == S
+    fast = ErrorSpec(n_joints=4, sample_period=h, position_resolution=res, torque_error=1.0, qd_max=spec.qd_max,
+                     qdd_max=np.full(4, 2000.0))  # qdd_max h / 2 = 1 rad/s: every step from the tube
+    fast_eqs = {m: certified_equation(geometry, q_meas, tau, fast, Processing(kernel_steps=40, encoder_jets=m))
+                for m in ("auto", "tube")}
+    assert fast_eqs["auto"].info["encoder_boxes_from_tube"] == S
+    for a, b in ((eqs["auto"], eqs["box"]), (fast_eqs["auto"], fast_eqs["tube"])):
+        for name in ("Wc", "D", "y", "bound"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    # the two are other enclosures of the same terms (interval jets are not monotone in the box: either may be the
+    # tighter on a slow motion, where the tube is barely bigger than the encoder box)
+    assert not np.array_equal(eqs["tube"].D, eqs["box"].D)

@@ -48,6 +48,9 @@ def test_certified_box_encloses_and_the_certificate_holds_without_an_allowance(r
     # every term proven: the nacelle columns' boxes all verified, nothing rests on sampled bounds
     eq = cert["equation"]
     assert eq["not_proven"] == [] and eq["encoder_boxes_proven"] == eq["motion_boxes_proven"] == eq["steps"]
+    # the scenario's encoder (20000 counts per turn) against its stated qdd_max: every step's encoder bounds are its
+    # motion tube's ("auto", ident.robots.h4_certified.encoder_from_tube), and the certificate holds on them
+    assert eq["encoder_jets"] == "auto" and eq["encoder_boxes_from_tube"] == eq["steps"]
     # every key the certified path adds is documented in docs/results.md (section `certified`)
     from tests.test_docs import documented
 
@@ -229,6 +232,7 @@ def test_identify_h4_refuses_an_understated_motion_bound(run_and_spec, tmp_path,
     ("kernel_shape = 'box'", ["kernel_shape must be one of"]),
     ("stride = 0", ["stride must be an integer >= 1"]),
     ("curvature_every = 0", ["curvature_every must be an integer >= 1"]),
+    ("encoder_jets = 'sampled'", ["encoder_jets must be one of", "'auto', 'box', 'tube'"]),
 ])
 def test_identify_h4_certified_table_errors_name_spec_file_and_key(run_and_spec, tmp_path, table, words):
     from typer.testing import CliRunner
