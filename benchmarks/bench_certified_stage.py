@@ -38,6 +38,13 @@ fused ufuncs, ident/numerics/_mr.cpp; the contractions' sums in index order, so 
 (the same to 4 digits), 0 violations. Without the extension (``H4BENCH_PURE_PYTHON=1``, the numpy formulas, the same
 bits) at f2e1dda, seed 0: equation 11.0 s, about what it was before the extension (11.5 s at 55022db); without the
 operands' own factors formed before the sums (eb5f875) 13.7 s, against 10.1 s at 55022db in the same session.
+At 07502f7 (``[certified] encoder_jets``: each step's encoder bounds from its motion tube's interval jets where the
+encoder's speed error is at most qdd_max h / 2, the default ``auto``), the same machine, ``--encoder-jets box`` (the
+code before, the same bits) then ``auto`` in one session: 26.3 -> 19.4 with 1 process, 21.2 -> 14.8 with 2
+(equation 6.91 -> 4.71 s and 5.16 -> 3.30 s, certificate 1.0-1.1 s, simulation 0.29-0.31 s); width/tuned 1.0103 /
+1.1641 / 1.0657 -> 1.0175 / 1.1766 / 1.0735, 0 violations; seed 1's Fs4 0.9887 -> 0.9961 of the prior (2 of 14 at
+the prior instead of 1). ``--counts 4096 --seeds 0``: ``auto`` keeps the encoder boxes (width/tuned 2.8143, 4 of
+14 at the prior); ``tube`` there: 3.2645 and 6.
 """
 
 import _setup  # noqa: F401  (repository root on sys.path, --threads)
