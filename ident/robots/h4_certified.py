@@ -37,7 +37,7 @@ from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
 from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
-from h4bench.ident.robots.h4_jets import box_jets_started, point_jets
+from h4bench.ident.robots.h4_jets import box_jets_started, point_jets, point_jets_started
 
 __all__ = ["CURVATURE_FACTOR", "ENCODER_JETS", "encoder_from_tube", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps", "MotionBounds", "Processing", "certified_equation",
            "certified_rows", "certified_steps", "curvature_bounds", "nacelle_terms", "stated_assumptions"]
@@ -311,8 +311,11 @@ def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, posit
         np.asarray(position_error, dtype=float), q.shape)
     qm = 0.5 * (q[:-1] + q[1:])
     pose = np.atleast_2d(forward_kinematics(geometry, qm))
+    points = []  # the point jets at the secant states, begun after the boxes' (the worker's queue runs in order)
 
     def evaluate(a, b):  # rigorous values and gradients at the measured secant states
+        if points and np.array_equal(a, qm) and np.array_equal(b, points[0]):
+            return points[1]()
         return point_jets(geometry, a, b, pose)
 
     # Per step, two sets of boxes, each enclosed by interval jets (module docstring); a step whose box cannot be
@@ -342,6 +345,7 @@ def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, posit
     own = np.flatnonzero(~from_tube) if np.any(e) else np.zeros(0, dtype=np.int64)
     encoder_done = box_jets_started(geometry, MR(qm, em_box)[own], MR(vm, ev_box)[own], pose[own], pool) \
         if own.size else None
+    points += [vm, point_jets_started(geometry, qm, vm, pose, pool)]
     GPm, HPm, GFm, HFm, proven_m = motion_done()
     if np.any(e):  # the encoder box lies in the tube (its radii are the box's plus the motion's): the tube's bounds hold
         GP, HP, GF, HF, proven = GPm.copy(), HPm.copy(), GFm.copy(), HFm.copy(), proven_m.copy()

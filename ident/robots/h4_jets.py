@@ -34,7 +34,8 @@ from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.numerics.jets import (MR, Jet, SingularIntervalMatrix, SplitJet, ein, inverse, jet_ein, jet_inverse,
                                         narrower, split_ein)
 
-__all__ = ["KrawczykFailure", "box_jets", "box_jets_started", "nacelle_jets", "point_jets", "pose_box"]
+__all__ = ["KrawczykFailure", "POINT_CHUNK", "box_jets", "box_jets_started", "nacelle_jets", "point_jets",
+           "point_jets_started", "pose_box"]
 
 N_JOINTS = 4
 _KRAWCZYK_TRIES = 6
@@ -45,6 +46,8 @@ SPLIT_ABOVE = 0.05  # the relative width of the pose gradient above which a box 
 #: ``certified --quick`` seed 0 at 914e5f9 the per-step stage took 7.7 s with 512 against 8.4 s with 128, and 10.6 s
 #: against 14.8 s at 4096 counts per turn (numpy's per-call overhead spread over more steps)
 BOX_CHUNK = 512
+#: steps per :func:`point_jets` chunk (the same bits for any chunk)
+POINT_CHUNK = 2048
 
 
 class KrawczykFailure(ArithmeticError):
@@ -278,16 +281,39 @@ def nacelle_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, order: int = 2):
     return P.to_jet(), F.to_jet()
 
 
-def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk: int = 2048):
+def point_jets(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, chunk: int | None = None):
     """First-order jets of P and F at the points (qm, v) (S, 4) (rigorous values and gradients; x_hat (S, 4) the
-    forward kinematics of qm), computed in chunks of ``chunk`` steps and joined."""
+    forward kinematics of qm), computed in chunks of ``chunk`` steps (default :data:`POINT_CHUNK`) and joined."""
+    chunk = POINT_CHUNK if chunk is None else int(chunk)
     parts = [nacelle_jets(geometry, MR(qm[i:i + chunk]), MR(v[i:i + chunk]), x_hat[i:i + chunk], order=1)
              for i in range(0, qm.shape[0], chunk)]
+    return tuple(_join_jets([p[k] for p in parts]) for k in (0, 1))
 
-    def join(items):
-        return MR(np.concatenate([m.c for m in items]), np.concatenate([m.r for m in items]))
 
-    return tuple(Jet(join([p[k].v for p in parts]), join([p[k].g for p in parts])) for k in (0, 1))
+def _join_jets(items) -> Jet:
+    """First-order jets of consecutive steps as one."""
+    def join(ms):
+        return MR(np.concatenate([m.c for m in ms]), np.concatenate([m.r for m in ms]))
+
+    return Jet(join([j.v for j in items]), join([j.g for j in items]))
+
+
+def point_jets_started(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, pool=None):
+    """:func:`point_jets` begun, as :func:`box_jets_started` begins :func:`box_jets`: with ``pool`` the later half of
+    the chunks is submitted to it at once; the returned function computes the rest here and joins (the same
+    chunks, the same bits)."""
+    chunk = POINT_CHUNK
+    n_chunks = -(-qm.shape[0] // chunk)
+    if pool is None or n_chunks < 2:
+        return lambda: point_jets(geometry, qm, v, x_hat, chunk)
+    cut = (n_chunks // 2) * chunk
+    later = pool.submit(point_jets, geometry, qm[cut:], v[cut:], x_hat[cut:], chunk)
+
+    def finish():
+        first = point_jets(geometry, qm[:cut], v[:cut], x_hat[:cut], chunk)
+        return tuple(_join_jets([a, b]) for a, b in zip(first, later.result()))
+
+    return finish
 
 
 def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int | None = None):

@@ -94,6 +94,7 @@ def test_two_processes_give_the_same_bits(geometry, monkeypatch):
     from h4bench.ident.robots.h4_certified import certified_equation
 
     monkeypatch.setattr(h4_jets, "BOX_CHUNK", 16)  # 60 steps: 4 chunks, 2 in each process
+    monkeypatch.setattr(h4_jets, "POINT_CHUNK", 16)  # and the point jets likewise
     q_true, q_meas, res = _log(geometry)
     spec = _spec(res, q_true)
     rng = np.random.default_rng(5)
