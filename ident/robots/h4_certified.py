@@ -24,6 +24,8 @@ forward kinematics of the measured positions gives, and numpy's sin/cos are with
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -231,8 +233,8 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
     motion : the :class:`MotionBounds` of another equation of the same steps (e.g. the measured log's,
     ``CertifiedEquation.motion``): its proven bounds serve every step whose motion tube lies inside that
     equation's (checked step by step, :meth:`MotionBounds.covers`), the interval jets the others.
-    processes : 1, or 2: the later half of the steps' interval jets in a worker process (:func:`certified_steps`;
-    the same bits).
+    processes : 1, or 2: the later half of the steps' interval jets in a worker process (:func:`certified_steps`),
+    and about half of the kernels' rows (:func:`_family_rows`); the same bits.
     """
     processing = processing or Processing()
     q = np.asarray(q, dtype=float)
@@ -245,9 +247,11 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
         pairs = list(zip(family.steps, family.strides))
     else:
         pairs = [(int(processing.kernel_steps), processing.stride)]
-    steps = certified_steps(geometry, q, spec, processing, position_error, motion, processes=processes)
-    eqs = [certified_rows(steps, make_kernel(L, h, processing.kernel_shape), row_windows(q.shape[0], L, st), tau)
-           for L, st in pairs]
+    if processes not in (1, 2):
+        raise ValueError(f"processes must be 1 or 2, got {processes!r}")
+    with _worker(processes) as pool:
+        steps = _certified_steps(geometry, q, spec, processing, position_error, motion, pool)
+        eqs = _family_rows(steps, pairs, processing.kernel_shape, tau, pool)
     eq = eqs[0] if processing.kernel_steps is not None else stack_family(
         eqs, family, kernel_steps=None, kernel_l1=max(e.info["kernel_l1"] for e in eqs))
     eq.info.update(kernel_shape=processing.kernel_shape, stride=processing.stride,
@@ -287,16 +291,51 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
     (:func:`ident.robots.h4_jets.box_jets_started`): each chunk's numbers are its own, so the bits are the same."""
     if processes not in (1, 2):
         raise ValueError(f"processes must be 1 or 2, got {processes!r}")
+    with _worker(processes) as pool:
+        return _certified_steps(geometry, q, spec, processing, position_error, motion, pool)
+
+
+@contextlib.contextmanager
+def _worker(processes: int):
+    """None for 1 process; for 2 a ``forkserver`` executor of one worker process, shut down at the end."""
     if processes == 1:
-        return _certified_steps(geometry, q, spec, processing, position_error, motion, None)
+        yield None
+        return
     import concurrent.futures  # noqa: PLC0415
     import multiprocessing  # noqa: PLC0415
 
     pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
     try:
-        return _certified_steps(geometry, q, spec, processing, position_error, motion, pool)
+        yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _kernel_rows(steps: CertifiedSteps, L: int, stride: int, shape: str, tau) -> CertifiedEquation:
+    n = steps.q.shape[0]
+    return certified_rows(steps, make_kernel(L, steps.spec.sample_period, shape), row_windows(n, L, stride), tau)
+
+
+def _family_rows(steps: CertifiedSteps, pairs, shape: str, tau, pool=None) -> list:
+    """The rows of each kernel ``(L, stride)`` of ``pairs`` (:func:`certified_rows`), in order; with ``pool`` the
+    kernels of about half the work (rows x steps, the largest first to the lighter side) in the worker, sent the
+    per-step stage without its motion bounds (the rows do not read them; each kernel's rows are its own: the same
+    bits)."""
+    if pool is None or len(pairs) < 2:
+        return [_kernel_rows(steps, L, st, shape, tau) for L, st in pairs]
+    n = steps.q.shape[0]
+    cost = [L * row_windows(n, L, st).start.size for L, st in pairs]
+    load, there = [0, 0], []
+    for k in sorted(range(len(pairs)), key=lambda k: -cost[k]):
+        side = int(load[1] < load[0])
+        load[side] += cost[k]
+        if side:
+            there.append(k)
+    light = dataclasses.replace(steps, motion=None)
+    later = {k: pool.submit(_kernel_rows, light, *pairs[k], shape, tau) for k in there}
+    here = {k: _kernel_rows(steps, *pairs[k], shape, tau) for k in range(len(pairs)) if k not in later}
+    return [here[k] if k in here else dataclasses.replace(later[k].result(), motion=steps.motion)
+            for k in range(len(pairs))]
 
 
 def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, position_error, motion, pool):

@@ -198,3 +198,29 @@ def test_encoder_bounds_from_the_tube_hold_over_the_encoder_box(geometry):
     # the two are other enclosures of the same terms (interval jets are not monotone in the box: either may be the
     # tighter on a slow motion, where the tube is barely bigger than the encoder box)
     assert not np.array_equal(eqs["tube"].D, eqs["box"].D)
+
+
+def test_the_kernels_rows_in_a_worker_give_the_same_bits(geometry):
+    """A family's rows with about half of its kernels computed in a worker process (certified_equation with
+    processes=2): every kernel's arrays equal those computed here, bit for bit, and the motion bounds re-attached."""
+    import concurrent.futures
+    import multiprocessing
+
+    from h4bench.ident.robots.h4_certified import _family_rows
+
+    q_true, q_meas, res = _log(geometry)
+    spec = _spec(res, q_true)
+    steps = certified_steps(geometry, q_meas, spec, Processing())
+    tau = np.random.default_rng(9).normal(size=q_meas.shape)
+    pairs = [(40, 2), (44, 3), (48, 2), (52, 5)]
+    here = _family_rows(steps, pairs, "hann", tau)
+    with concurrent.futures.ProcessPoolExecutor(max_workers=1,
+                                                mp_context=multiprocessing.get_context("forkserver")) as pool:
+        split = _family_rows(steps, pairs, "hann", tau, pool)
+    assert [e.info["kernel_steps"] for e in split] == [40, 44, 48, 52]
+    for a, b in zip(here, split):
+        for name in ("Wc", "D", "y", "bound", "sample", "joint"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        for k in a.terms:
+            np.testing.assert_array_equal(a.terms[k], b.terms[k])
+        assert b.motion is steps.motion
