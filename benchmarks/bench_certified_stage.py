@@ -69,9 +69,12 @@ def one(seed: int, quick: bool, counts: int = 0, processes=(1,), encoder_jets: s
     if encoder_jets:
         spec["certified"]["encoder_jets"] = encoder_jets
     run_ = run_experiment(spec, seed)
+    from h4bench.ident.workers import stop_shared_worker
+
     out = []
     for p in processes:
         os.environ["H4BENCH_HULL_PROCESSES"] = str(p)
+        stop_shared_worker()  # each measurement starts its worker, as one `h4bench run certified` does
         out.append(dict(_certified(run_, spec, seed), processes=p))
     return out
 

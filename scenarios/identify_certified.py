@@ -89,7 +89,10 @@ def identify_certified_csv(path, spec_path, prior=(0.0, 2.0), model=None, out=No
     specification (``consistent: false``), and the parameters the box leaves at the prior with the radius term
     that is why (``certified.prior_diagnosis``).
     """
+    from h4bench.ident.workers import prewarm
     from h4bench.scenarios.identify import OptionError, _prior_box
+
+    prewarm(hull_processes())  # the certified stage's second process starts while the log is read
 
     error_spec = _read_spec(spec_path)
     processing = read_processing(spec_path)

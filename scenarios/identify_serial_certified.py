@@ -91,6 +91,9 @@ def identify_urdf_spec(path, urdf, spec_path, *, mass=None, reach=None, friction
     from h4bench.ident.processing.motion_check import check_motion_bounds
     from h4bench.ident.robots.serial_certified import certified_equation, certified_family, serial_strides
 
+    from h4bench.ident.workers import prewarm
+
+    prewarm(hull_processes())  # the certified stage's second process starts while the URDF and the log are read
     t0 = time.perf_counter()
 
     def stage(name):  # progress(done, total) of one stage, or None

@@ -8,19 +8,19 @@ LPs' tolerances.
 
 The split is a fixed part of the computation, not of the machine: :class:`HullSplit` runs the second half in a
 worker process when it is given ``processes=2`` and in this process after the first otherwise, and both give the
-same bits (each half is deterministic and sees the same inputs). The worker is started once (``forkserver``: a
-clean process, no HiGHS threads forked) and reused by every hull of a refinement.
+same bits (each half is deterministic and sees the same inputs). The worker is the process-wide one of
+:mod:`ident.workers` (``forkserver``: a clean process, no HiGHS threads forked), reused by every hull of a
+refinement and by the certified path's other halves; an error in the block terminates it.
 """
 
 from __future__ import annotations
 
-import concurrent.futures
-import multiprocessing
 from dataclasses import dataclass
 
 import numpy as np
 
 from h4bench.ident.estimators.hull import COUNTERS, HullResult, HullWarm, interval_hull
+from h4bench.ident.workers import shared_worker, stop_shared_worker
 
 __all__ = ["HullSplit", "SplitWarm"]
 
@@ -54,15 +54,12 @@ class HullSplit:
     def __exit__(self, exc_type, *exc) -> None:
         if self._pool is not None:
             if exc_type is not None:  # interrupted or failed: stop the worker's half now, not at its end
-                for proc in list(getattr(self._pool, "_processes", {}).values()):
-                    proc.terminate()
-            self._pool.shutdown(wait=exc_type is None, cancel_futures=True)
+                stop_shared_worker(terminate=True)
             self._pool = None
 
     def _worker(self):
         if self._pool is None:
-            self._pool = concurrent.futures.ProcessPoolExecutor(
-                max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
+            self._pool = shared_worker()
         return self._pool
 
     def hull(self, W, bl, bu, lo, hi, *, warm: SplitWarm | None = None, **kwargs) -> HullResult:

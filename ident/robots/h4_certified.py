@@ -24,7 +24,6 @@ forward kinematics of the measured positions gives, and numpy's sin/cos are with
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 from dataclasses import dataclass, field
 
@@ -39,6 +38,7 @@ from h4bench.ident.robots.h4 import PARAMETER_NAMES
 from h4bench.ident.robots.h4_interval import IntervalEquation
 from h4bench.ident.numerics.interval import up
 from h4bench.ident.numerics.jets import MR
+from h4bench.ident.workers import shared_map, worker
 from h4bench.ident.robots.h4_jets import box_jets_started, point_jets, point_jets_started
 
 __all__ = ["CURVATURE_FACTOR", "ENCODER_JETS", "encoder_from_tube", "MIN_KERNEL_STEPS", "STATED", "CertifiedEquation", "CertifiedSteps", "MotionBounds", "Processing", "certified_equation",
@@ -249,7 +249,7 @@ def certified_equation(geometry, q, tau, spec: ErrorSpec, processing: Processing
         pairs = [(int(processing.kernel_steps), processing.stride)]
     if processes not in (1, 2):
         raise ValueError(f"processes must be 1 or 2, got {processes!r}")
-    with _worker(processes) as pool:
+    with worker(processes) as pool:
         steps = _certified_steps(geometry, q, spec, processing, position_error, motion, pool)
         eqs = _family_rows(steps, pairs, processing.kernel_shape, tau, pool)
     eq = eqs[0] if processing.kernel_steps is not None else stack_family(
@@ -291,24 +291,8 @@ def certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, positi
     (:func:`ident.robots.h4_jets.box_jets_started`): each chunk's numbers are its own, so the bits are the same."""
     if processes not in (1, 2):
         raise ValueError(f"processes must be 1 or 2, got {processes!r}")
-    with _worker(processes) as pool:
+    with worker(processes) as pool:
         return _certified_steps(geometry, q, spec, processing, position_error, motion, pool)
-
-
-@contextlib.contextmanager
-def _worker(processes: int):
-    """None for 1 process; for 2 a ``forkserver`` executor of one worker process, shut down at the end."""
-    if processes == 1:
-        yield None
-        return
-    import concurrent.futures  # noqa: PLC0415
-    import multiprocessing  # noqa: PLC0415
-
-    pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
-    try:
-        yield pool
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _kernel_rows(steps: CertifiedSteps, L: int, stride: int, shape: str, tau) -> CertifiedEquation:
@@ -318,24 +302,11 @@ def _kernel_rows(steps: CertifiedSteps, L: int, stride: int, shape: str, tau) ->
 
 def _family_rows(steps: CertifiedSteps, pairs, shape: str, tau, pool=None) -> list:
     """The rows of each kernel ``(L, stride)`` of ``pairs`` (:func:`certified_rows`), in order; with ``pool`` the
-    kernels of about half the work (rows x steps, the largest first to the lighter side) in the worker, sent the
-    per-step stage without its motion bounds (the rows do not read them; each kernel's rows are its own: the same
-    bits)."""
-    if pool is None or len(pairs) < 2:
-        return [_kernel_rows(steps, L, st, shape, tau) for L, st in pairs]
-    n = steps.q.shape[0]
-    cost = [L * row_windows(n, L, st).start.size for L, st in pairs]
-    load, there = [0, 0], []
-    for k in sorted(range(len(pairs)), key=lambda k: -cost[k]):
-        side = int(load[1] < load[0])
-        load[side] += cost[k]
-        if side:
-            there.append(k)
-    light = dataclasses.replace(steps, motion=None)
-    later = {k: pool.submit(_kernel_rows, light, *pairs[k], shape, tau) for k in there}
-    here = {k: _kernel_rows(steps, *pairs[k], shape, tau) for k in range(len(pairs)) if k not in later}
-    return [here[k] if k in here else dataclasses.replace(later[k].result(), motion=steps.motion)
-            for k in range(len(pairs))]
+    kernels are shared with the worker (:func:`ident.workers.shared_map`), sent the per-step stage without its
+    motion bounds (the rows do not read them; each kernel's rows are its own: the same bits)."""
+    light = steps if pool is None else dataclasses.replace(steps, motion=None)
+    eqs = shared_map(pool, _kernel_rows, [(light, L, st, shape, tau) for L, st in pairs])
+    return [e if e.motion is steps.motion else dataclasses.replace(e, motion=steps.motion) for e in eqs]
 
 
 def _certified_steps(geometry, q, spec: ErrorSpec, processing: Processing, position_error, motion, pool):

@@ -31,6 +31,7 @@ import itertools
 import numpy as np
 
 from h4bench.ident.numerics.interval import U, up
+from h4bench.ident.workers import shared_started
 from h4bench.ident.numerics.jets import (MR, Jet, SingularIntervalMatrix, SplitJet, ein, inverse, jet_ein, jet_inverse,
                                         narrower, split_ein)
 
@@ -299,21 +300,14 @@ def _join_jets(items) -> Jet:
 
 
 def point_jets_started(geometry, qm: np.ndarray, v: np.ndarray, x_hat: np.ndarray, pool=None):
-    """:func:`point_jets` begun, as :func:`box_jets_started` begins :func:`box_jets`: with ``pool`` the later half of
-    the chunks is submitted to it at once; the returned function computes the rest here and joins (the same
-    chunks, the same bits)."""
+    """:func:`point_jets` begun, as :func:`box_jets_started` begins :func:`box_jets`: with ``pool`` its chunks are
+    shared with the worker (:func:`ident.workers.shared_started`); the returned function computes this process's
+    and joins (the same chunks, the same bits)."""
     chunk = POINT_CHUNK
-    n_chunks = -(-qm.shape[0] // chunk)
-    if pool is None or n_chunks < 2:
-        return lambda: point_jets(geometry, qm, v, x_hat, chunk)
-    cut = (n_chunks // 2) * chunk
-    later = pool.submit(point_jets, geometry, qm[cut:], v[cut:], x_hat[cut:], chunk)
-
-    def finish():
-        first = point_jets(geometry, qm[:cut], v[:cut], x_hat[:cut], chunk)
-        return tuple(_join_jets([a, b]) for a, b in zip(first, later.result()))
-
-    return finish
+    pieces = [(geometry, qm[i:i + chunk], v[i:i + chunk], x_hat[i:i + chunk], chunk)
+              for i in range(0, qm.shape[0], chunk)]
+    started = shared_started(pool, point_jets, pieces)
+    return lambda: tuple(_join_jets(list(parts)) for parts in zip(*started()))
 
 
 def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int | None = None):
@@ -347,19 +341,15 @@ def box_jets(geometry, Q: MR, V: MR, x_hat: np.ndarray, chunk: int | None = None
 
 
 def box_jets_started(geometry, Q: MR, V: MR, x_hat: np.ndarray, pool=None):
-    """:func:`box_jets` begun: with ``pool`` (a ``concurrent.futures`` executor of another process) the later half
-    of the chunks is submitted to it at once; the returned function computes the rest here and joins, the same
-    bits as :func:`box_jets` (the halves meet at a chunk boundary, so every chunk holds the same steps). Without a
-    pool, or with one chunk, the returned function computes it all."""
+    """:func:`box_jets` begun: with ``pool`` (an executor of another process) its chunks are shared with it, the
+    later ones submitted now (:func:`ident.workers.shared_started`: this process also takes those the worker has
+    not begun when it gets there); the returned function computes this process's and joins, the same bits as
+    :func:`box_jets` (every chunk holds the same steps). Without a pool, or with one chunk, the returned function
+    computes it all."""
     chunk = BOX_CHUNK
-    n_chunks = -(-Q.shape[0] // chunk)
-    if pool is None or n_chunks < 2:
+    S = Q.shape[0]
+    if pool is None or S <= chunk:
         return lambda: box_jets(geometry, Q, V, x_hat, chunk)
-    cut = (n_chunks // 2) * chunk  # the worker takes the later ceil(n / 2) chunks (the caller has more to do)
-    later = pool.submit(box_jets, geometry, Q[cut:], V[cut:], x_hat[cut:], chunk)
-
-    def finish():
-        first = box_jets(geometry, Q[:cut], V[:cut], x_hat[:cut], chunk)
-        return tuple(np.concatenate([a, b]) for a, b in zip(first, later.result()))
-
-    return finish
+    pieces = [(geometry, Q[i:i + chunk], V[i:i + chunk], x_hat[i:i + chunk], chunk) for i in range(0, S, chunk)]
+    started = shared_started(pool, box_jets, pieces)
+    return lambda: tuple(np.concatenate(parts) for parts in zip(*started()))

@@ -218,12 +218,10 @@ def _inertial(robot, geo, q, e, spec, m: int, kernels, progress, processes: int,
     cut = [int(np.searchsorted(st, middle)) for _, st in kernels]
     if processes == 1 or not any(0 < c < len(st) for c, (_, st) in zip(cut, kernels)):
         return inertial_family(robot, geo, q, e, spec, m, kernels, progress)
-    import concurrent.futures  # noqa: PLC0415
-    import multiprocessing  # noqa: PLC0415
+    from h4bench.ident.workers import worker  # noqa: PLC0415
 
     second = [(kern, st[c:]) for c, (kern, st) in zip(cut, kernels) if c < len(st)]
-    pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"))
-    try:
+    with worker(2) as pool:
         later = pool.submit(_inertial_piece, (robot, geo, q, e, spec, m, second))
         first_k = [(kern, st[:c]) for c, (kern, st) in zip(cut, kernels) if c > 0]
         total = sum(len(st) for _, st in kernels)
@@ -232,8 +230,6 @@ def _inertial(robot, geo, q, e, spec, m: int, kernels, progress, processes: int,
         rest = later.result()
         if progress is not None:
             progress(total, total)
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
     out = []
     it1, it2 = iter(first), iter(rest)
     for c, (_, st) in zip(cut, kernels):

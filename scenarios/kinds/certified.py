@@ -36,6 +36,10 @@ SPEC_DEFAULTS = {
 
 
 def run(spec: dict, seed: int, out: Path, progress) -> dict:
+    from h4bench.ident.workers import prewarm
+    from h4bench.scenarios.threads import hull_processes
+
+    prewarm(hull_processes())  # the certified stage's second process starts while the simulation runs
     progress("experiment", 0, 3)
     run_ = run_experiment(spec, seed, progress=sim_progress(progress))
     progress("certified", 1, 3)

@@ -168,6 +168,11 @@ def run(spec: dict, seed: int, out: Path, progress) -> dict:
     """Registry entry point: the study, then result files (report.md, PNG plots) in ``out``. With
     ``certified.enabled`` (``--error-model derived``) also the certified box (:mod:`scenarios.tx40_certified`):
     the method entry ``certified``, ``error_model`` and ``certified`` in the result."""
+    if spec["certified"]["enabled"]:  # the certified stage's second process starts during the tuned study
+        from h4bench.ident.workers import prewarm
+        from h4bench.scenarios.threads import hull_processes
+
+        prewarm(hull_processes())
     result, art = run_tx40(spec["tx40"], seed, progress)
     result["quick"] = bool(spec.get("quick_applied", False))
     result["estimators"] = judge_estimators(spec["estimators"]["methods"], result, art)
