@@ -63,18 +63,19 @@ def one(seed: int, quick: bool, counts: int = 0, processes=(1,), encoder_jets: s
     from h4bench.scenarios.experiment import run_experiment
     from h4bench.scenarios.registry import load_spec
 
+    from h4bench.ident.workers import prewarm, stop_shared_worker
+
+    prewarm(max(processes))  # as `h4bench run certified` does before its simulation
     spec = load_spec("certified", quick=quick)
     if counts:
         spec["encoder"]["counts_per_turn"] = counts
     if encoder_jets:
         spec["certified"]["encoder_jets"] = encoder_jets
     run_ = run_experiment(spec, seed)
-    from h4bench.ident.workers import stop_shared_worker
-
     out = []
     for p in processes:
         os.environ["H4BENCH_HULL_PROCESSES"] = str(p)
-        stop_shared_worker()  # each measurement starts its worker, as one `h4bench run certified` does
+        stop_shared_worker()  # each measurement starts its own worker (forked from the running fork server)
         out.append(dict(_certified(run_, spec, seed), processes=p))
     return out
 

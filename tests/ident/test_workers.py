@@ -34,8 +34,9 @@ def test_a_busy_worker_leaves_its_pieces_to_this_process():
         busy = pool.submit(_sleep, 3.0)  # the worker is taken: the pieces submitted after it are not begun
         got = workers.shared_map(pool, _square_and_pid, [(k,) for k in range(8)])
         assert [g[0] for g in got] == [k * k for k in range(8)]
-        # at most the one piece the executor already handed to the worker's queue is computed there
-        assert sum(pid != os.getpid() for _, pid in got) <= 1
+        # at most the pieces the executor had already moved to the worker's call queue (max_workers + 1 = 2 behind
+        # the running sleep) are computed there
+        assert sum(pid != os.getpid() for _, pid in got) <= 2
         worker_pid = busy.result()
     # an idle worker does its share: the last pieces of a long list (which of them depends on timing)
     with workers.worker(2) as pool:
