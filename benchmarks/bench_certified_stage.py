@@ -44,7 +44,10 @@ code before, the same bits) then ``auto`` in one session: 26.3 -> 19.4 with 1 pr
 (equation 6.91 -> 4.71 s and 5.16 -> 3.30 s, certificate 1.0-1.1 s, simulation 0.29-0.31 s); width/tuned 1.0103 /
 1.1641 / 1.0657 -> 1.0175 / 1.1766 / 1.0735, 0 violations; seed 1's Fs4 0.9887 -> 0.9961 of the prior (2 of 14 at
 the prior instead of 1). ``--counts 4096 --seeds 0``: ``auto`` keeps the encoder boxes (width/tuned 2.8143, 4 of
-14 at the prior); ``tube`` there: 3.2645 and 6.
+14 at the prior); ``tube`` there: 3.2645 and 6. At 5e712ba (the point jets and the kernel rows shared with the
+worker too, one worker kept for the command and started before the simulation: ident/workers.py), the same
+machine: 16.3 with 1 process, 12.4 with 2 (equation 4.48 and 3.30 s, certificate 0.98 and 0.84 s, simulation
+0.34 s), the same widths, 0 violations.
 """
 
 import _setup  # noqa: F401  (repository root on sys.path, --threads)
