@@ -32,7 +32,11 @@ for folder in LAYOUT["SUBPACKAGES"] + LAYOUT["DATA_PACKAGES"]:
 # gives the same bits; no fused multiply-add, so that it does
 FLAGS = ["/O2", "/fp:strict"] if sys.platform == "win32" else ["-O2", "-std=c++17", "-ffp-contract=off"]
 LOOP = Extension("h4bench.sim._loop", ["sim/_loop.cpp"], language="c++", extra_compile_args=FLAGS, optional=True)
-EXTENSIONS = [LOOP]
+# a serial chain's batched regressor (ident/robots/_chain.cpp; ident/robots/chain.py): optional, the numpy formulas
+# give the same bits
+CHAIN = Extension("h4bench.ident.robots._chain", ["ident/robots/_chain.cpp"], language="c++",
+                  extra_compile_args=FLAGS, optional=True)
+EXTENSIONS = [LOOP, CHAIN]
 # the interval arithmetic's fused ufuncs (ident/numerics/_mr.cpp; ident/numerics/fused.py): optional too, the numpy
 # formulas give the same bits; numpy's headers come from the build requirements (pyproject.toml)
 try:

@@ -1,7 +1,8 @@
 """The per-window reference computation of a serial arm's certified equation (the previous implementation, kept
-as the oracle of :mod:`ident.robots.serial_steps`): per window and per sample step of it, one pinocchio regressor
-call at the window's scaled speed and acceleration, and the local bounds of each step (:class:`_Steps`, cached)
-evaluated one step at a time. Slow (a Python loop over windows x steps); the same numbers as the vectorised
+as the oracle of :mod:`ident.robots.serial_steps`): per window and per sample step of it, one regressor call
+(:func:`ident.robots.serial_steps.regressor_one`, the regressor the vectorised computation uses) at the window's
+scaled speed and acceleration, and the local bounds of each step (:class:`_Steps`, cached) evaluated one step at a
+time. Slow (a Python loop over windows x steps); the same numbers as the vectorised
 :func:`ident.robots.serial_steps.inertial_rows` up to floating-point rounding (tests/ident/test_serial_fast.py).
 """
 
@@ -9,14 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident.robots.serial_steps import PARTS, StepGrid, q_remainder, speed_linear
+from h4bench.ident.robots.serial_steps import PARTS, StepGrid, q_remainder, regressor_one, speed_linear
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
 __all__ = ["inertial_rows_reference"]
 
 
 class _Steps(StepGrid):
-    """Per-step local data at the measured mid-step position ``qh`` and speed estimate ``vh`` (pinocchio
+    """Per-step local data at the measured mid-step position ``qh`` and speed estimate ``vh`` (regressor
     evaluations, cached): the gravity columns, the mass-matrix columns, and the radii aggregates per row entry
     (n rows, pi inertial columns) of the module docstring's local bounds. Step j spans ``[t_j, t_j+1]``; the
     sample-instant aggregates of sample j use steps j-1 and j. The log's secants: :class:`StepGrid`."""
@@ -38,16 +39,14 @@ class _Steps(StepGrid):
         return self.cache[j]
 
     def _compute(self, j: int, with_prev: bool = True) -> dict:  # noqa: PLR0915 - one derivation, kept in one place
-        import pinocchio as pin
-
-        model, data, n, geo = self.robot.model, self.robot.data, self.n, self.geo
+        n, geo = self.n, self.geo
         eta, dt = self.ETA, self.dt
         qh, vh = self.qbar[j], self.vh[j]
         Z = np.zeros(n)
         I = np.eye(n)
 
         def Y(qq, v, a):
-            return pin.computeJointTorqueRegressor(model, data, qq, v, a).copy()
+            return regressor_one(self.robot, qq, v, a)
 
         g0 = Y(qh, Z, Z)
         f0 = Y(qh, vh, Z)
@@ -142,9 +141,8 @@ class _Steps(StepGrid):
 
 def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=None):
     """The inertial columns' window sums, window by window (arguments and returns as
-    :func:`ident.robots.serial_steps.inertial_rows`; ``recon`` is 0: the regressor is pinocchio's own)."""
-    import pinocchio as pin
-
+    :func:`ident.robots.serial_steps.inertial_rows`; ``recon`` is 0: the regressor is evaluated at the window's
+    arguments, not rebuilt)."""
     nj = robot.n_joints
     N = q.shape[0]
     dt = spec.sample_period
@@ -157,9 +155,8 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
     ni = 10 * nj
     Wi = np.zeros((R_, nj, ni))
     mag = np.zeros((R_, nj, ni))
-    recon = np.zeros((R_, nj, ni))  # the speed_linear centre term's own error bound (the regressor is pinocchio's)
+    recon = np.zeros((R_, nj, ni))  # the speed_linear centre term's own error bound (the regressor evaluated)
     parts_i = {name: np.zeros((R_, nj, ni)) for name in PARTS}
-    model, data = robot.model, robot.data
     vh, dq = st_.vh, st_.dq
     for r, s in enumerate(starts):
         st = slice(s, s + L)  # steps of the window
@@ -177,7 +174,7 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
         for jj in range(L):
             j = s + jj
             d = st_.get(j)
-            Yj = pin.computeJointTorqueRegressor(model, data, st_.qbar[j], vs[jj], u[jj])
+            Yj = regressor_one(robot, st_.qbar[j], vs[jj], u[jj])
             acc += Yj + (K1[jj] - 1.0) * d["g0"] + K1[jj] * d["Jc"]
             ab += np.abs(Yj) + abs(K1[jj] - 1.0) * d["mag"] + K1[jj] * d["aJc"]
             jf += K1[jj] * d["Jf"]

@@ -2,11 +2,14 @@
 steps, window sums for all windows at once (:mod:`ident.robots.serial_certified` derives the bounds; this module
 evaluates them).
 
-**Per step** j (``[t_j, t_j+1]``, mid-step position ``qh``, speed estimate ``vh``) pinocchio's regressor is called
+**Per step** j (``[t_j, t_j+1]``, mid-step position ``qh``, speed estimate ``vh``) the regressor is evaluated
 at ``qh``, at ``qh + ETA e_k`` and at ``qh + ETA (e_a + e_b)`` with the arguments of the module docstring of
 :mod:`ident.robots.serial_certified` (gravity, the speed estimate, unit speeds and accelerations: ``2 + 2 n + n (n -
-1) / 2 + n (3 n + 2) + n (n + 1) / 2`` calls, each step once); every other operation runs on arrays of many steps
-at once, in the same arithmetic as the per-step reference (:mod:`ident.robots.serial_reference`).
+1) / 2 + n (3 n + 2) + n (n + 1) / 2`` evaluations, each step once): a batch of steps in one call of
+:func:`ident.robots.chain.regressor` for a chain of revolute joints, pinocchio's one at a time otherwise. Only the
+entries a chain can fill are kept (:func:`ident.robots.chain.live_entries`: ``5 n (n + 1)`` of the ``10 n^2``, the
+others zero for every state). Every other operation runs on arrays of many steps at once, in the same arithmetic as
+the per-step reference (:mod:`ident.robots.serial_reference`).
 
 **Per window** the regressor at the window's scaled speed and acceleration is not called again: ``Y(q, v, a) =
 g(q) + h(q, v) + M(q) a`` with ``h`` quadratic in v, so the reference's call ``Y(qh_j, sqrt(K_w) vh_j, u_w)`` is
@@ -20,8 +23,8 @@ the per-(window, step) arrays (the rebuilt regressor, the differences of kernel-
 steps: the speed estimates' exact gradients) are formed for a few windows at a time (``memory`` bounds them).
 
 **Steps held**: the per-step arrays of the windows starting within about ``max(L, 256)`` steps, plus the
-``L + 2`` steps the next windows share (moved, not evaluated again): ``8 (max(L, 256) + L) (15 + 3 n) 10 n^2``
-bytes, 76 MB for 6 joints and 113 MB for 7 at L = 400.
+``L + 2`` steps the next windows share (moved, not evaluated again): ``8 (max(L, 256) + L) (15 + 3 n) 5 n (n + 1)``
+bytes, 44 MB for 6 joints and 65 MB for 7 at L = 400.
 """
 
 from __future__ import annotations
@@ -31,9 +34,10 @@ from numpy.lib.stride_tricks import as_strided
 
 from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.processing.weakform import Kernel
+from h4bench.ident.robots.chain import live_entries
 
 __all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_family", "inertial_rows", "local_bounds", "q_remainder",
-           "speed_linear"]
+           "regressor_one", "robot_chain", "speed_linear"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
@@ -75,6 +79,83 @@ class StepGrid:
         self.ew_mot = qddm * (m * dt / 2)
         self.ew_pos = np.full((N, n), np.inf)
         self.ew_pos[ks] = (e[ks + m] + e[ks - m]) / (2 * m * dt)
+
+
+def _regressor_calls(robot, qh, vh) -> dict:
+    """The regressor evaluations of steps with mid positions qh (C, n) and speed estimates vh (C, n): each (C, ...)
+    with the regressor's live entries last (F = 5 n (n + 1): :func:`ident.robots.chain.live_entries`, the others
+    are zero); ``ha``, ``pair``, ``Mc``, ``Mk``, ``Vp``, ``Vm`` before subtracting. A chain of revolute joints goes
+    through :func:`ident.robots.chain.regressor` (all of a batch's evaluations in one call), any other model through
+    pinocchio one call at a time (:func:`_pinocchio_calls`)."""
+    from h4bench.ident.robots.chain import regressor  # noqa: PLC0415
+
+    ch = robot_chain(robot)
+    if ch is None:
+        live = live_entries(qh.shape[1])
+        return {k: v.reshape(v.shape[:-2] + (-1,))[..., live] for k, v in _pinocchio_calls(robot, qh, vh).items()}
+    C, n = qh.shape
+    I = np.eye(n)
+    pa, pb = np.triu_indices(n, 1)
+    fa, fb = np.triu_indices(n)
+    shifts = ETA * I
+    qk = qh[:, None, :] + shifts[None]  # (C, k, n): qh + ETA e_k
+    # (q, v, a) of each evaluation, evaluations at one position together (the chain shares their kinematics): g0,
+    # f0, ha, pair, Mc at qh | per k: gk, fk, Mk (b), Vp (b), Vm (b) at qh + ETA e_k | fab
+    Z1 = np.zeros((C, 1, n))
+    at_qh = np.broadcast_to(qh[:, None], (C, 2 + 2 * n + pa.size, n))
+    v_qh = np.concatenate([Z1, vh[:, None], np.broadcast_to(I, (C, n, n)),
+                           np.broadcast_to(I[pa] + I[pb], (C, pa.size, n)), np.zeros((C, n, n))], axis=1)
+    a_qh = np.concatenate([Z1, Z1, np.zeros((C, n + pa.size, n)), np.broadcast_to(I, (C, n, n))], axis=1)
+    nk = 2 + 3 * n  # evaluations per shifted position
+    at_k = np.broadcast_to(qk[:, :, None, :], (C, n, nk, n))
+    vk = np.empty((C, n, nk, n))
+    vk[:, :, 0] = 0.0
+    vk[:, :, 1] = vh[:, None]
+    vk[:, :, 2:2 + n] = 0.0
+    vk[:, :, 2 + n:2 + 2 * n] = vh[:, None, None] + I  # row b: vh + e_b
+    vk[:, :, 2 + 2 * n:] = vh[:, None, None] - I
+    ak = np.zeros((C, n, nk, n))
+    ak[:, :, 2:2 + n] = I
+    q_f = qh[:, None, :] + (shifts[fa] + shifts[fb])[None]
+    Q = np.concatenate([at_qh, at_k.reshape(C, n * nk, n), q_f], axis=1).reshape(-1, n)
+    V = np.concatenate([v_qh, vk.reshape(C, n * nk, n), np.broadcast_to(vh[:, None], (C, fa.size, n))],
+                       axis=1).reshape(-1, n)
+    A = np.concatenate([a_qh, ak.reshape(C, n * nk, n), np.zeros((C, fa.size, n))], axis=1).reshape(-1, n)
+    E = at_qh.shape[1] + n * nk + fa.size
+    sh = (5 * n * (n + 1),)
+    Y = regressor(ch, Q, V, A, packed=True).reshape((C, E) + sh)
+    h0 = at_qh.shape[1]
+    Yk = Y[:, h0:h0 + n * nk].reshape((C, n, nk) + sh)  # views: the in-place differences of local_bounds work on them
+    pair = np.zeros((C, n, n) + sh)
+    pair[:, pa, pb] = Y[:, 2 + n:2 + n + pa.size]
+    fab = np.empty((C, n, n) + sh)
+    fab[:, fa, fb] = Y[:, h0 + n * nk:]
+    fab[:, fb, fa] = Y[:, h0 + n * nk:]
+    return {"g0": Y[:, 0], "f0": Y[:, 1], "ha": Y[:, 2:2 + n], "pair": pair, "Mc": Y[:, 2 + n + pa.size:h0],
+            "gk": Yk[:, :, 0], "fk": Yk[:, :, 1], "Mk": Yk[:, :, 2:2 + n], "Vp": Yk[:, :, 2 + n:2 + 2 * n],
+            "Vm": Yk[:, :, 2 + 2 * n:], "fab": fab}
+
+
+def regressor_one(robot, q, v, a) -> np.ndarray:
+    """One evaluation (n, 10 n) of the regressor :func:`_regressor_calls` uses (the chain's or pinocchio's)."""
+    ch = robot_chain(robot)
+    if ch is None:
+        import pinocchio as pin  # noqa: PLC0415
+
+        return pin.computeJointTorqueRegressor(robot.model, robot.data, q, v, a).copy()
+    from h4bench.ident.robots.chain import regressor  # noqa: PLC0415
+
+    return regressor(ch, np.asarray(q)[None], np.asarray(v)[None], np.asarray(a)[None])[0]
+
+
+def robot_chain(robot):
+    """The robot's :class:`ident.robots.chain.Chain` (kept on it), or None when it is not a chain of revolute
+    joints."""
+    from h4bench.ident.robots.chain import chain_of  # noqa: PLC0415
+
+    if not hasattr(robot, "_chain_cache"):
+        robot._chain_cache = chain_of(robot.model)
+    return robot._chain_cache
 
 
 def _pinocchio_calls(robot, qh, vh) -> dict:
@@ -224,7 +305,7 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     J = np.arange(j0, j1)
     eta, dt, n = ETA, grid.dt, grid.n
     vh = grid.vh[J]
-    p = _pinocchio_calls(robot, grid.qbar[J], vh)
+    p = _regressor_calls(robot, grid.qbar[J], vh)
     g0, f0 = p["g0"], p["f0"]
     C = J.size
     ha = p["ha"] - g0[:, None]
@@ -234,7 +315,7 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
         for b in range(a + 1, n):
             gam[:, a, b] = gam[:, b, a] = 0.5 * (p["pair"][:, a, b] - g0 - ha[:, a] - ha[:, b])
     Mc = p["Mc"] - g0[:, None]  # (s, b, i, c): column b of M per unit parameter
-    Jv = 2 * np.einsum("sabic,sb->saic", gam, vh)  # exact: h is quadratic in v
+    Jv = 2 * np.einsum("sabf,sb->saf", gam, vh)  # exact: h is quadratic in v
     mag = np.abs(f0) + np.abs(g0)
     Jq = (p["fk"] - f0[:, None]) / eta
     # in place, the reference's operations in its order: dM = (Mk - gk - Mc) / eta, only |dM| is read
@@ -250,7 +331,7 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     flt = 4 * PIN_REL / eta
     # bounds on the true derivatives (forward-difference truncation by Bernstein, pinocchio's float error)
     vs = np.sum(np.abs(vh), axis=1)
-    c4 = (slice(None),) + (None,) * 3
+    c4 = (slice(None), None, None)  # (C,) over (C, n, F)
     JqB = np.abs(Jq) + (eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]))[c4] + flt * (mag[:, None] + np.abs(Jq) * eta)
     dMB = _bound(dM, 2 * eta * geo["M"], 2.0, flt)  # |dM| + 2 eta M + flt (2 + |dM| eta)
     dJvB = _bound(dJv, (4 * eta * geo["gamma"] * (vs + 1))[c4 + (None,)], 2 * mag[:, None, None], flt)
@@ -269,31 +350,31 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     gmag += 3 * np.abs(g0)[:, None, None]
     lin = speed_linear(Jv, gam, gmag, vh, grid.dq[J], grid.e[J], grid.e[J + 1], qddm, dt)
     del p, Jq, dM, dJv, aY, gmag
-    c3 = (slice(None), None, None)
+    c3 = (slice(None), None)  # (C,) over (C, F)
     # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order (Taylor: 1/2 of 4 M)
-    dMq = np.einsum("skbic,b->skic", dMB, qddm)
-    A_mot = (np.einsum("skic,sk->sic", dMq, dq_mean)
+    dMq = np.einsum("skbf,b->skf", dMB, qddm)
+    A_mot = (np.einsum("skf,sk->sf", dMq, dq_mean)
              + (2 * geo["M"] * qddm.sum() * np.sum(dq_max, axis=1) ** 2)[c3])
-    A_pos = np.einsum("skic,sk->sic", dMq, ebar)
+    A_pos = np.einsum("skf,sk->sf", dMq, ebar)
     # (h + g)(q(t), qd(t)) against (h + g)(qh, vh) (the reference's comments)
     absG = np.abs(gam)
     mot = grid.ev_mot_max
-    Q_mm = np.einsum("sabic,a,b->sic", absG, mot, mot)
+    Q_mm = np.einsum("sabf,a,b->sf", absG, mot, mot)
     dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
-    rem = (rem_qq + np.einsum("skaic,sk,sa->sic", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
-    H_mot = np.einsum("skic,sk->sic", JqB, dq_mean) + Q_mm + rem  # Jv (v - vh): speed_linear
+    rem = (rem_qq + np.einsum("skaf,sk,sa->sf", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
+    H_mot = np.einsum("skf,sk->sf", JqB, dq_mean) + Q_mm + rem  # Jv (v - vh): speed_linear
     # Q_all - Q_mm without the cancellation: ev_max = mot + ev_pos, so the difference is a sum of non-negative
     # products (|G| mot ev_pos twice and |G| ev_pos ev_pos)
     pos = grid.ev_pos[J]
-    Q_pos = (np.einsum("sabic,a,sb->sic", absG, mot, pos) + np.einsum("sabic,sa,b->sic", absG, pos, mot)
-             + np.einsum("sabic,sa,sb->sic", absG, pos, pos))
-    H_pos = np.einsum("skic,sk->sic", JqB, ebar) + Q_pos
-    dlt = np.einsum("skbic,sk->sbic", dMB, ebar) + (2 * geo["M"] * np.sum(ebar, axis=1) ** 2)[c4]
+    Q_pos = (np.einsum("sabf,a,sb->sf", absG, mot, pos) + np.einsum("sabf,sa,b->sf", absG, pos, mot)
+             + np.einsum("sabf,sa,sb->sf", absG, pos, pos))
+    H_pos = np.einsum("skf,sk->sf", JqB, ebar) + Q_pos
+    dlt = np.einsum("skbf,sk->sbf", dMB, ebar) + (2 * geo["M"] * np.sum(ebar, axis=1) ** 2)[c4]
     e = grid.e
     return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot,
             "H_pos": H_pos, "Cmax": dlt.max(axis=1),
-            "Dloc": np.einsum("sbic,sb->sic", dlt, np.abs(grid.dq[J]) + e[J] + e[J + 1]),
-            "Ecur": np.einsum("sbic,sb->sic", np.abs(Mc), e[J]), "Jv": Jv, **lin}
+            "Dloc": np.einsum("sbf,sb->sf", dlt, np.abs(grid.dq[J]) + e[J] + e[J + 1]),
+            "Ecur": np.einsum("sbf,sb->sf", np.abs(Mc), e[J]), "Jv": Jv, **lin}
 
 
 def _sample_terms(grid: StepGrid, j0: int, cur: dict, Mc_prev, dlt_prev) -> dict:
@@ -304,21 +385,21 @@ def _sample_terms(grid: StepGrid, j0: int, cur: dict, Mc_prev, dlt_prev) -> dict
     dMhat = Mc_prev - Mc
     dMj = np.abs(dMhat) + dlt_prev + dlt  # bound on |M_{j-1} - M_j| at the true positions
     e = grid.e[J]
-    return {"dMhat": dMhat, "B_mot": np.einsum("sbic,b->sic", dMj, grid.ew_mot),
-            "B_pos": np.einsum("sbic,sb->sic", dlt_prev + dlt, grid.ew_pos[J]),
-            "Eknot": np.einsum("sbic,sb->sic", np.abs(Mc_prev), e),
-            "Ediff": np.einsum("sbic,sb->sic", np.abs(Mc_prev - Mc), e)}
+    return {"dMhat": dMhat, "B_mot": np.einsum("sbf,b->sf", dMj, grid.ew_mot),
+            "B_pos": np.einsum("sbf,sb->sf", dlt_prev + dlt, grid.ew_pos[J]),
+            "Eknot": np.einsum("sbf,sb->sf", np.abs(Mc_prev), e),
+            "Ediff": np.einsum("sbf,sb->sf", np.abs(Mc_prev - Mc), e)}
 
 
 class _StepBuffer:
-    """The per-step arrays (:data:`_KEEP`) of the consecutive steps ``b0 .. b0 + size - 1``, flattened to
-    (steps, F) or (steps, n, F) with F = 10 n^2; :meth:`advance` drops the steps before a new first one and evaluates
-    the missing ones, ``batch`` steps per pinocchio batch."""
+    """The per-step arrays (:data:`_KEEP`) of the consecutive steps ``b0 .. b0 + size - 1``, (steps, F) or (steps,
+    n, F) with F = 5 n (n + 1) live entries; :meth:`advance` drops the steps before a new first one and evaluates
+    the missing ones, ``batch`` steps per regressor batch."""
 
     def __init__(self, robot, geo, grid: StepGrid, capacity: int, batch: int = 32):
         self.robot, self.geo, self.grid, self.batch = robot, geo, grid, batch
         n = grid.n
-        F = 10 * n * n
+        F = live_entries(n).size
         self.arr = {k: np.empty((capacity, n, F) if k in ("Mc", "aMc", "Jv") else (capacity, F)) for k in _KEEP}
         self.b0, self.size = 0, 0
         self.last_dlt = None  # (n, F): dlt of step b0 + size - 1 (for the next step's sample terms)
@@ -460,7 +541,9 @@ def inertial_rows(robot, geo, q, e, spec, m: int, kern: Kernel, starts, progress
     Returns ``(Wi, mag, recon, parts)``: Wi (R, n, 10 n) the window sums of the regressor [N m per unit
     parameter], mag (R, n, 10 n) the magnitudes it sums (``sum |Y| + |K - 1| |g0|``, the floating-point radius'
     base), recon (R, n, 10 n) the bound of the regressor reconstruction's rounding (module docstring), parts
-    {name: (R, n, 10 n)} the radii of :data:`PARTS` (before masking and outward rounding).
+    {name: (R, n, 10 n)} the radii of :data:`PARTS` (before outward rounding). Each is 0 at the entries a chain
+    cannot fill (:func:`ident.robots.chain.live_entries`: joint j's row in a body's columns before j), where the
+    regressor is zero for every state; the per-step stage evaluates the live entries only.
     """
     return inertial_family(robot, geo, q, e, spec, m, [(kern, starts)], progress, memory=memory)[0]
 
@@ -476,7 +559,7 @@ class _KernelRows:
         self.stride = int(self.starts[1] - self.starts[0]) if self.R > 1 else 1
         if self.R > 1 and (self.stride < 1 or np.any(np.diff(self.starts) != self.stride)):
             raise ValueError("starts must be equally spaced and increasing")
-        F = 10 * n * n
+        F = live_entries(n).size
         self.wt = _weights(kern)
         self.rc = max(1, int(memory // (8 * 4 * n * F * (self.L + 2 * m + 2))))  # windows per batch of pair terms
         # module docstring; the sum's rounding
@@ -503,9 +586,15 @@ class _KernelRows:
         self.done = upto
 
     def result(self, n: int):
-        sh = (self.R, n, 10 * n)
+        live = live_entries(n)
+
+        def full(a):  # the structural zeros back in
+            out = np.zeros((self.R, n * 10 * n))
+            out[:, live] = a
+            return out.reshape(self.R, n, 10 * n)
+
         o = self.out
-        return o["Wi"].reshape(sh), o["mag"].reshape(sh), o["recon"].reshape(sh), {k: o[k].reshape(sh) for k in PARTS}
+        return full(o["Wi"]), full(o["mag"]), full(o["recon"]), {k: full(o[k]) for k in PARTS}
 
 
 def inertial_family(robot, geo, q, e, spec, m: int, kernels, progress=None, *, memory: int = 2**27) -> list:

@@ -59,7 +59,7 @@ def test_identify_spec_encloses_the_truth(synthetic_csv):
     assert r["certified"]["spec_check"]["contradicted"] == [] and r["certified"]["rows"] > 0
     assert json.loads((d / "out" / "result.json").read_text())["methods"]["certified"]["lower"] == m["lower"]
     # what rests on statements is listed with its source; the row radius is named by its parts
-    assert r["error_model"]["sources"]["pinocchio_float"].startswith("stated, not proven")
+    assert r["error_model"]["sources"]["regressor_float"].startswith("stated, not proven")
     rr = r["certified"]["row_radius"]
     assert rr["torque_side_max"] <= rr["total_max"] and rr["torque_side_median"] <= rr["total_median"]
     # the parameters left at the prior are named with the term that dominates and what would help
