@@ -49,6 +49,10 @@ UR5     9493379  29.0                 10.0          18.2      1624   0.0470     
 Panda   9493379  57.6                 16.7          39.9      2236   0.0384       1.12              69/69
 UR5     6308044  26.7                 10.0          15.8      1615   0.0470       1.15              58/58
 Panda   6308044  48.2                 16.2          31.0      2282   0.0384       1.12              69/69
+UR5     f2be299  38.3                 14.1          22.8      1631   0.0470       1.15              58/58
+Panda   f2be299  82.2                 26.4          54.3      2228   0.0384       1.12              69/69
+UR5     4fffe11  36.1                 9.7           24.1      1631   0.0470       1.15              58/58
+Panda   4fffe11  58.4                 11.5          45.3      2228   0.0384       1.12              69/69
 ======  =======  ===================  ============  ========  =====  ===========  ================  ========
 
 (LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio, the
@@ -64,7 +68,11 @@ machine: the family's kernels share one pass of the per-step stage, split betwee
 per round for the Panda) and its rounds on the dual simplex (1 and 6 runs stopped at the iteration limit, re-run
 cold); and the base parameters by h4bench.portable instead of LAPACK: another choice among equal columns, so the
 widths are of other parameters and another prior. Tuned hulls 2.2 s and 3.1 s. At 6308044 a warm-started LP run is
-cut at 1000 simplex iterations and re-run cold (uncertain_signed.SIGNED_BUDGET: 5 and 25 such runs).) What changed: the q-q remainder of the
+cut at 1000 simplex iterations and re-run cold (uncertain_signed.SIGNED_BUDGET: 5 and 25 such runs). The f2be299 and
+4fffe11 rows ran one after the other in one session on a slower machine, alone on it: at 4fffe11 the regressor of a
+revolute chain is evaluated in compiled code, a step's evaluations in one call (ident.robots.chain), and the per-step
+stage keeps the regressor entries a chain can fill only; the same boxes, the equations 0.69 and 0.44 times as long.)
+What changed: the q-q remainder of the
 Coriolis and gravity terms bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated
 exactly (1b54bd7), and the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069,
 6fc8ab8). At 6fc8ab8 the Panda's hull took 9 rounds (median width / prior after each: 0.711, 0.229, 0.110, 0.0619,
