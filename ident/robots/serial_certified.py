@@ -28,9 +28,15 @@ the spec to balance ``qdd_max m dt`` against ``e / (m dt)``). **Radii** (each te
 ``position``  the encoder/format error e (``ErrorSpec.position_error``) through the exact gradient of the row's
               discrete functional (summation by parts: ``sum_j e_j |G_j|``, ``G_j`` from ``k'_{j-1} - k'_j``;
               no jerk bound), its effect on M and h through the Lipschitz bounds below;
-``motion``    within-step variation of the configuration (``qd_max dt / 2``), of the speed (``qdd_max``), the
-              secants' truncation (``qdd_max m dt / 2``), the trapezoid, all from the stated ``qd_max``,
-              ``qdd_max``;
+``motion``    within-step variation of the configuration (the step's chord, ``|s*| dt / 4`` on the kernel-weighted
+              mean, ``|s*| dt / 2`` at most, ``s*`` the true step speed, enclosed from the measured step, plus the
+              chord's remainder ``qdd_max dt^2 / 12`` and ``/ 8``: :func:`ident.robots.serial_steps.
+              step_displacements`), of the speed (``qdd_max``: the speed's deviation from the secant over ``S =
+              (2 m - 1) dt`` is at most ``qdd_max (dt^2 + S^2) / (4 S)`` in the step, and its quadratic term in
+              the Coriolis part takes the smaller of that bound squared and a mean-square bound, the variance
+              ``qdd_max^2 dt^2 / 12`` for m = 1, through Cauchy-Schwarz: :func:`ident.robots.serial_steps.
+              quadratic_speed_weights`), the knot secants' truncation (``qdd_max m dt / 2``), the trapezoid, all
+              from the stated ``qd_max``, ``qdd_max``;
 ``coulomb``   sign uncertainty of steps whose speed bound includes 0;
 ``torque``    ``torque_error int|k|`` (+ ``torque_rate dt / 2`` for sample-instant torques, + ``torque_rate
               latency``), ``model``: ``model_error``; ``rounding``: floating-point allowance.

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from h4bench.ident.robots.serial_steps import PARTS, StepGrid, q_remainder, regressor_one, speed_linear
+from h4bench.ident.robots.serial_steps import (PARTS, StepGrid, q_remainder, quadratic_speed_weights, regressor_one,
+                                               speed_linear, step_displacements)
 from h4bench.ident.robots.serial_steps import PIN_REL as _PIN_REL
 
 __all__ = ["inertial_rows_reference"]
@@ -84,10 +85,9 @@ class _Steps(StepGrid):
         # speeds and position boxes of the step (true motion)
         ebar = self.ebar[j]
         ev_max = self.ev_mot_max + self.ev_pos[j]
-        sp = np.abs(vh) + ev_max  # bound on the true |qd| over the step
-        dq_mean = sp * dt / 4 + self.qddm * dt**2 / 8
-        dq_max = sp * dt / 2 + self.qddm * dt**2 / 8 + ebar
         qddm = self.qddm
+        dq_mean, dq_max = (x[0] for x in step_displacements(self.dq[j][None], self.e[j][None], self.e[j + 1][None],
+                                                            ebar[None], qddm, dt))
         # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order (Taylor: 1/2 of 4 M)
         dMq = np.einsum("kbic,b->kic", dMB, qddm)
         A_mot = np.einsum("kic,k->ic", dMq, dq_mean) + 2 * geo["M"] * qddm.sum() * dq_max.sum() ** 2
@@ -97,11 +97,11 @@ class _Steps(StepGrid):
         # q-v one with local d/dq of dh/dv and Bernstein
         absG = np.abs(gam)
         mot = self.ev_mot_max
-        Q_mm = np.einsum("abic,a,b->ic", absG, mot, mot)
+        Gq = np.einsum("abic,a,b->ic", absG, qddm, qddm)  # the speed deviation's quadratic term, per kernel weight
         dvs, dqs = float(ev_max.sum()), float(dq_max.sum())
         rem = (q_remainder(fab[None], fk[None], f0[None], qh[None], vh[None], ev_max[None], dq_max[None], geo)[0]
                + np.einsum("kaic,k,a->ic", dJvB, dq_max, ev_max) + 2 * geo["gamma"] * dvs * dvs * dqs)
-        H_mot = np.einsum("kic,k->ic", JqB, dq_mean) + Q_mm + rem
+        H_mot = np.einsum("kic,k->ic", JqB, dq_mean) + rem
         # the speed's linear term Jv (v - vh) integrated at the true step speeds (speed_linear): the centre term "Jc",
         # "Jk" times |k'|, the measurement error through the row's exact gradient (window loop, "Jv")
         Ya = np.stack([Y(qh, I[a], Z) for a in range(n)])
@@ -116,7 +116,8 @@ class _Steps(StepGrid):
         H_pos = np.einsum("kic,k->ic", JqB, ebar) + Q_pos
         # |M(true mid) - M(qh)| per column b
         dlt = np.einsum("kbic,k->bic", dMB, ebar) + 2 * geo["M"] * float(ebar.sum()) ** 2
-        out = {"g0": g0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "H_pos": H_pos,
+        out = {"g0": g0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "Gq": Gq,
+               "H_pos": H_pos,
                "Cmax": dlt.max(axis=0),
                "Dloc": np.einsum("bic,b->ic", dlt, np.abs(self.dq[j]) + self.e[j] + self.e[j + 1]),
                "Ecur": np.einsum("bic,b->ic", np.abs(Mc), self.e[j]),
@@ -150,6 +151,7 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
     k, K1 = kern.knots, kern.integrals
     L = k.size - 1
     kp = np.diff(k) / dt
+    cq = quadratic_speed_weights(kern, m)
     dkp = np.abs(np.diff(np.concatenate([[0.0], kp, [0.0]])))
     R_ = len(starts)
     ni = 10 * nj
@@ -179,7 +181,7 @@ def inertial_rows_reference(robot, geo, q, e, spec, m, kern, starts, progress=No
             ab += np.abs(Yj) + abs(K1[jj] - 1.0) * d["mag"] + K1[jj] * d["aJc"]
             jf += K1[jj] * d["Jf"]
             part["mass_motion"] += K1[jj] * d["A_mot"]
-            part["coriolis_motion"] += K1[jj] * d["H_mot"] + abs(kp[jj]) * d["Jk"]
+            part["coriolis_motion"] += K1[jj] * d["H_mot"] + abs(kp[jj]) * d["Jk"] + cq[jj] * d["Gq"]
             part["speed_motion"] += k[jj] * d["B_mot"]
             part["mass_position"] += K1[jj] * d["A_pos"] + d["Cmax"] * xs[jj] + abs(kp[jj]) * d["Dloc"]
             part["coriolis_position"] += K1[jj] * d["H_pos"]

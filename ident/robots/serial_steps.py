@@ -23,8 +23,8 @@ the per-(window, step) arrays (the rebuilt regressor, the differences of kernel-
 steps: the speed estimates' exact gradients) are formed for a few windows at a time (``memory`` bounds them).
 
 **Steps held**: the per-step arrays of the windows starting within about ``max(L, 256)`` steps, plus the
-``L + 2`` steps the next windows share (moved, not evaluated again): ``8 (max(L, 256) + L) (15 + 3 n) 5 n (n + 1)``
-bytes, 44 MB for 6 joints and 65 MB for 7 at L = 400.
+``L + 2`` steps the next windows share (moved, not evaluated again): ``8 (max(L, 256) + L) (20 + 3 n) 5 n (n + 1)``
+bytes (:data:`_KEEP`), 51 MB for 6 joints and 73 MB for 7 at L = 400.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from h4bench.ident.processing.weakform import Kernel
 from h4bench.ident.robots.chain import live_entries
 
 __all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_family", "inertial_rows", "local_bounds", "q_remainder",
-           "regressor_one", "robot_chain", "speed_linear"]
+           "quadratic_speed_weights", "regressor_one", "robot_chain", "speed_linear", "step_displacements"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
@@ -46,7 +46,7 @@ PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relati
 PARTS = ("mass_motion", "coriolis_motion", "speed_motion", "mass_position", "coriolis_position", "speed_position",
          "gradient_position")
 # per-step arrays of (n rows, 10 n columns) the window sums read, and the (n, n rows, 10 n columns) ones
-_KEEP = ("g0", "fg", "af0", "ag0", "A_mot", "A_pos", "H_mot", "H_pos", "Cmax", "Dloc", "Ecur", "B_mot", "B_pos",
+_KEEP = ("g0", "fg", "af0", "ag0", "A_mot", "A_pos", "H_mot", "Gq", "H_pos", "Cmax", "Dloc", "Ecur", "B_mot", "B_pos",
          "Eknot", "Ediff", "Mc", "aMc", "Jv", "Jc", "aJc", "Jk", "Jf")
 
 
@@ -57,7 +57,7 @@ class StepGrid:
     secant half-span [steps]. Per step (N - 1 rows): ``qbar`` mid-step position, ``ebar`` its error, ``dq`` the
     step, ``vh`` the speed secant over 2 m - 1 steps (NaN where it leaves the log), ``ev_pos`` its measurement
     error; per sample (N rows): ``w`` the centred secant over 2 m steps, ``ew_pos`` its measurement error;
-    ``ev_mot_max``, ``ev_mot_mean``, ``ew_mot`` (n,) the secants' truncation bounds.
+    ``ev_mot_max``, ``ew_mot`` (n,) the secants' truncation bounds.
     """
 
     def __init__(self, q, e, dt, qddm, m):
@@ -71,14 +71,45 @@ class StepGrid:
         self.vh[js] = (q[js + m] - q[js + 1 - m]) / self.S
         self.ev_pos = np.full((N - 1, n), np.inf)
         self.ev_pos[js] = (e[js + m] + e[js + 1 - m]) / self.S
-        self.ev_mot_max = qddm * (dt / 2 + self.S / 4)  # max over the step of |qd(t) - qd_true secant|
-        self.ev_mot_mean = qddm * (dt / 4 + self.S / 4)  # its k-weighted mean over the step
+        self.ev_mot_max = qddm * self.mot_max_factor(dt, m)  # max over the step of |qd(t) - qd_true secant|
         self.w = np.full((N, n), np.nan)
         ks = np.arange(m, N - m)
         self.w[ks] = (q[ks + m] - q[ks - m]) / (2 * m * dt)
         self.ew_mot = qddm * (m * dt / 2)
         self.ew_pos = np.full((N, n), np.inf)
         self.ew_pos[ks] = (e[ks + m] + e[ks - m]) / (2 * m * dt)
+
+    @staticmethod
+    def mot_max_factor(dt: float, m: int) -> float:
+        """``c`` [s] with ``|qd(t) - vh*| <= qdd_max c`` for every t in a step, ``vh*`` the true secant over the
+        ``2 m - 1`` steps centred on it (span ``S``): ``vh*`` is the mean of qd over the span, so ``|qd(t) - vh*|
+        <= qdd_max mean_u |t - u| = qdd_max ((t - c)^2 + S^2 / 4) / S`` (c the span's centre, ``|t - c| <= dt / 2
+        <= S / 2``), at most ``(dt^2 + S^2) / (4 S)`` (attained: qd = qdd_max |u - t_end|); rounded up."""
+        S = (2 * m - 1) * dt
+        return (dt * dt + S * S) / (4 * S) * (1 + 4 * U)
+
+    @staticmethod
+    def mot_ms_factor(dt: float, m: int) -> float:
+        """``c2`` [s^2] with ``(1 / dt) int_step (qd(t) - vh*)^2 dt <= qdd_max^2 c2``: for m = 1 ``vh*`` is the
+        step's mean speed, so this is the variance of qd over the step, ``1/2 E (qd(U) - qd(U'))^2 <= qdd_max^2
+        dt^2 / 12`` (U, U' independent uniform on the step); for m > 1 Jensen's inequality over the span, ``E_t
+        E_u (qd(t) - qd(u))^2 <= qdd_max^2 (dt^2 + S^2) / 12``; rounded up."""
+        S = (2 * m - 1) * dt
+        return (dt * dt / 12 if m == 1 else (dt * dt + S * S) / 12) * (1 + 4 * U)
+
+
+def quadratic_speed_weights(kern: Kernel, m: int) -> np.ndarray:
+    """(L,) per kernel step w the weight ``c_w`` of ``Gq = sum_ab |Gamma_ab| qdd_max_a qdd_max_b`` (per step) in
+    the bound of the speed deviation's quadratic term ``int_step k (v - vh*)^T Gamma (v - vh*)`` (k >= 0 on
+    the step): the smaller of ``K_w c^2`` (the pointwise bound of :meth:`StepGrid.mot_max_factor`, squared) and
+    ``max(k_w, k_w+1) dt c2`` (Cauchy-Schwarz, ``int k |x_a| |x_b| <= max k sqrt(int x_a^2 int x_b^2)``, with the
+    mean-square bound :meth:`StepGrid.mot_ms_factor`); rounded up. For m = 1 the second is about a third of the
+    first inside the kernel; for m > 1 the first is the smaller."""
+    dt, k = kern.h, kern.knots
+    c = StepGrid.mot_max_factor(dt, m)
+    point = kern.integrals * (c * c) * (1 + 4 * U)
+    ms = np.maximum(k[:-1], k[1:]) * (dt * StepGrid.mot_ms_factor(dt, m)) * (1 + 4 * U)
+    return np.minimum(point, ms)
 
 
 def _regressor_calls(robot, qh, vh) -> dict:
@@ -285,6 +316,23 @@ def q_remainder(fab, fk, f0, qh, vh, ev_max, dq_max, geo):
     return rem
 
 
+def step_displacements(dq, e0, e1, ebar, qddm, dt):
+    """The step's position excursions from its measured mid-step position ``qh`` (per step, arrays (C, n)): the
+    kernel-weighted mean and the max over the step of ``|q(t) - qh|``, motion part and max with the error ``ebar``.
+
+    The true step ``[t_j, t_j+1]``: ``q(t) = chord(t) + r(t)`` with the chord through the true end positions
+    (slope ``s*``, ``|s*| <= (|dq| + e0 + e1) / dt``) and ``|r(t)| <= qdd_max (t - t_j) (t_j+1 - t) / 2``; the
+    chord's middle is ``qh`` within ``ebar``. So ``|q(t) - qh| <= |t - t_mid| |s*| + |r(t)| + ebar``, whose mean
+    under a weight linear on the step and >= 0 (a symmetric function's weighted mean is its plain mean) is ``|s*|
+    dt / 4 + qdd_max dt^2 / 12`` (+ ebar: the position parts) and whose max is ``|s*| dt / 2 + qdd_max dt^2 / 8 +
+    ebar``. Returns (dq_mean, dq_max), rounded up."""
+    grow = 1 + 8 * U
+    st = (np.abs(dq) + e0 + e1) * grow
+    dq_mean = (st * 0.25 + qddm * (dt * dt / 12)) * grow
+    dq_max = (st * 0.5 + qddm * (dt * dt / 8) + ebar) * grow
+    return dq_mean, dq_max
+
+
 def _bound(d, c, mag, flt):
     """``|d| + c + flt (mag + |d| ETA)`` evaluated in that order, overwriting d (with ``mag + x`` as ``x + mag``:
     the same float)."""
@@ -338,10 +386,8 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     # speeds and position boxes of the step (true motion)
     ebar = grid.ebar[J]
     ev_max = grid.ev_mot_max + grid.ev_pos[J]
-    sp = np.abs(vh) + ev_max  # bound on the true |qd| over the step
     qddm = grid.qddm
-    dq_mean = sp * dt / 4 + qddm * dt**2 / 8
-    dq_max = sp * dt / 2 + qddm * dt**2 / 8 + ebar
+    dq_mean, dq_max = step_displacements(grid.dq[J], grid.e[J], grid.e[J + 1], ebar, qddm, dt)
     rem_qq = q_remainder(p["fab"], p["fk"], f0, grid.qbar[J], vh, ev_max, dq_max, geo)
     aY = np.abs(p["ha"])
     gmag = np.abs(p["pair"])  # filled for a < b only: symmetric
@@ -359,10 +405,10 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     # (h + g)(q(t), qd(t)) against (h + g)(qh, vh) (the reference's comments)
     absG = np.abs(gam)
     mot = grid.ev_mot_max
-    Q_mm = np.einsum("sabf,a,b->sf", absG, mot, mot)
+    Gq = np.einsum("sabf,a,b->sf", absG, qddm, qddm)  # the quadratic speed term's, per kernel weight (window sums)
     dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
     rem = (rem_qq + np.einsum("skaf,sk,sa->sf", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
-    H_mot = np.einsum("skf,sk->sf", JqB, dq_mean) + Q_mm + rem  # Jv (v - vh): speed_linear
+    H_mot = np.einsum("skf,sk->sf", JqB, dq_mean) + rem  # Jv (v - vh): speed_linear; Gq: the rows
     # Q_all - Q_mm without the cancellation: ev_max = mot + ev_pos, so the difference is a sum of non-negative
     # products (|G| mot ev_pos twice and |G| ev_pos ev_pos)
     pos = grid.ev_pos[J]
@@ -371,7 +417,7 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     H_pos = np.einsum("skf,sk->sf", JqB, ebar) + Q_pos
     dlt = np.einsum("skbf,sk->sbf", dMB, ebar) + (2 * geo["M"] * np.sum(ebar, axis=1) ** 2)[c4]
     e = grid.e
-    return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot,
+    return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "Gq": Gq,
             "H_pos": H_pos, "Cmax": dlt.max(axis=1),
             "Dloc": np.einsum("sbf,sb->sf", dlt, np.abs(grid.dq[J]) + e[J] + e[J + 1]),
             "Ecur": np.einsum("sbf,sb->sf", np.abs(Mc), e[J]), "Jv": Jv, **lin}
@@ -484,7 +530,8 @@ def _correlations(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: in
     x = kw[:, 1:] - kw[:, :-1]
     u = x - wt["kp"][:, None] * _view(grid.dq, s0, R, stride, L)
     xs = np.abs(x).sum(axis=2)  # (R, L)
-    out = {"mass_motion": K1 @ V("A_mot"), "coriolis_motion": K1 @ V("H_mot") + akp @ V("Jk"),
+    out = {"mass_motion": K1 @ V("A_mot"),
+           "coriolis_motion": K1 @ V("H_mot") + akp @ V("Jk") + wt["cq"] @ V("Gq"),
            "speed_motion": k[:L] @ V("B_mot"),
            "mass_position": K1 @ V("A_pos") + np.matmul(xs[:, None, :], V("Cmax"))[:, 0] + akp @ V("Dloc"),
            "coriolis_position": K1 @ V("H_pos"), "speed_position": k[:L] @ V("B_pos"),
@@ -560,7 +607,7 @@ class _KernelRows:
         if self.R > 1 and (self.stride < 1 or np.any(np.diff(self.starts) != self.stride)):
             raise ValueError("starts must be equally spaced and increasing")
         F = live_entries(n).size
-        self.wt = _weights(kern)
+        self.wt = dict(_weights(kern), cq=quadratic_speed_weights(kern, m))
         self.rc = max(1, int(memory // (8 * 4 * n * F * (self.L + 2 * m + 2))))  # windows per batch of pair terms
         # module docstring; the sum's rounding
         self.c_rec = 2 * (n + 5) * U * (1 + 2 * (self.L * (n + 3) + 2) * U) * (1 + 4 * U)

@@ -41,11 +41,17 @@ def base(robot):
     return robot.base(200, 0)
 
 
-def _trajectory(seed):
+def _trajectory(seed, vibration=0.0):
+    """Sums of sines per joint; ``vibration`` [rad/s^2] adds a 250 Hz component of that acceleration amplitude
+    (a period of 4 sample steps: the speed swings within each step, as on an arm whose one-step accelerations
+    dominate its stated qdd_max)."""
     rng = np.random.default_rng(seed)
     om = np.array([1.3, 2.9, 5.1]) * 2 * np.pi / 3
     a = rng.uniform(0.1, 0.4, (6, 3))
-    ph = rng.uniform(0, 2 * np.pi, (6, 3))
+    if vibration:
+        om = np.r_[om, 2 * np.pi * 250.0]
+        a = np.c_[a, np.full(6, vibration / om[-1] ** 2)]
+    ph = rng.uniform(0, 2 * np.pi, (6, a.shape[1]))
     c = rng.uniform(-1, 1, 6)
 
     def traj(t):
@@ -55,16 +61,16 @@ def _trajectory(seed):
     return traj, (a * om).sum(1), (a * om**2).sum(1)
 
 
-def _log(robot, seed=0, T=1.2, qdd_scale=1.0, torque_scale=1.0):
+def _log(robot, seed=0, T=1.2, qdd_scale=1.0, torque_scale=1.0, counts=COUNTS, vibration=0.0):
     rng = np.random.default_rng(seed + 1)
-    traj, qd_max, qdd_max = _trajectory(seed)
+    traj, qd_max, qdd_max = _trajectory(seed, vibration)
     theta = robot.urdf_parameters({"fv": rng.uniform(0.5, 3, 6), "Ia": rng.uniform(0.01, 0.3, 6),
                                    "off": rng.uniform(-0.5, 0.5, 6), "Iam": 0.01, "fvm": 0.3})
     # Coulomb friction 0: its sign flips make the torque jump, and a sample-instant torque needs a rate bound
     N = int(round(T / DT)) + 1
     q, qd, qdd = traj(np.arange(N) * DT)
     tau = (robot.regressor(q, qd, qdd) @ theta).reshape(N, 6)
-    res = 2 * np.pi / COUNTS
+    res = 2 * np.pi / counts
     q_meas = np.round(q / res) * res
     # the worst case for a kernel average: a slow square wave of the full amplitude (white noise averages out)
     square = np.sign(np.sin(2 * np.pi * np.arange(N)[:, None] * DT / 0.4 + rng.uniform(0, 2 * np.pi, 6)))
@@ -99,10 +105,10 @@ refine = {refine}
 """
 
 
-def _true_rows(robot, theta, traj, eq):
-    """int k Y(q, qd, qdd) dt and int k tau dt of the true motion, Gauss-Legendre on every sample step."""
+def _true_rows(robot, theta, traj, eq, points=4):
+    """int k Y(q, qd, qdd) dt and int k tau dt of the true motion, Gauss-Legendre (``points`` per sample step)."""
     k = make_kernel(2 * H, DT, "triangle").knots
-    gx, gw = np.polynomial.legendre.leggauss(4)
+    gx, gw = np.polynomial.legendre.leggauss(points)
     W, y = [], []
     for s in eq.window[::6, 0]:
         tt = (s + np.arange(2 * H)[:, None] + (gx[None, :] + 1) / 2) * DT
@@ -159,6 +165,21 @@ def test_derived_radii_cover_the_actual_errors_row_by_row(synthetic):
     assert np.allclose(eq.terms["torque"][eq.joint == 0], TORQUE_ERROR + spec.torque_rate[0] * DT / 2, rtol=1e-9)
     # the square wave's plateaus use most of the torque bound
     assert 0.5 < np.max(np.abs(eq.y - y_true) / eq.bound) <= 1.0
+    assert check_motion_bounds(q, spec).contradicted == []
+
+
+def test_radii_cover_the_actual_errors_when_the_speed_swings_within_each_step(robot, base):
+    """A fine encoder (2^24 counts: the secants span one step, m = 1, where the speed deviation's quadratic term
+    takes its mean-square bound) and a 250 Hz vibration of 300 rad/s^2 (the speed deviates from each step's
+    secant by up to about qdd_max dt / 2 within the step): every entry and row within its radius against the
+    true rows (12 Gauss-Legendre points per step: the vibration is resolved)."""
+    traj, theta, q, tau, spec = _log(robot, counts=2**24, vibration=300.0)
+    eq = certified_equation(robot, base, q, tau, spec, half_width=H, stride=2 * H)
+    assert eq.info["secant_half_span"] == 1
+    W_true, y_true = _true_rows(robot, theta, traj, eq, points=12)
+    cert = certificate(eq, W_true[:, base.independent], y_true, base.from_standard(theta))
+    assert cert["entry_violations"] == 0 and cert["torque_violations"] == 0 and cert["violations"] == 0
+    assert cert["parts"]["coriolis_motion"]["median"] > 0
     assert check_motion_bounds(q, spec).contradicted == []
 
 
