@@ -53,6 +53,8 @@ UR5     f2be299  38.3                 14.1          22.8      1631   0.0470     
 Panda   f2be299  82.2                 26.4          54.3      2228   0.0384       1.12              69/69
 UR5     4fffe11  36.1                 9.7           24.1      1631   0.0470       1.15              58/58
 Panda   4fffe11  58.4                 11.5          45.3      2228   0.0384       1.12              69/69
+UR5     65d4861  32.7                 7.4           23.7      1616   0.0469       1.14              58/58
+Panda   65d4861  54.8                 11.4          42.0      2225   0.0382       1.12              69/69
 ======  =======  ===================  ============  ========  =====  ===========  ================  ========
 
 (LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio, the
@@ -71,7 +73,10 @@ widths are of other parameters and another prior. Tuned hulls 2.2 s and 3.1 s. A
 cut at 1000 simplex iterations and re-run cold (uncertain_signed.SIGNED_BUDGET: 5 and 25 such runs). The f2be299 and
 4fffe11 rows ran one after the other in one session on a slower machine, alone on it: at 4fffe11 the regressor of a
 revolute chain is evaluated in compiled code, a step's evaluations in one call (ident.robots.chain), and the per-step
-stage keeps the regressor entries a chain can fill only; the same boxes, the equations 0.69 and 0.44 times as long.)
+stage keeps the regressor entries a chain can fill only; the same boxes, the equations 0.69 and 0.44 times as long.
+The 65d4861 rows ran alone on that machine: the within-step motion bounds made exact (the speed's deviation from its
+secant, the step's excursion from its chord, the quadratic speed term); on these torque-dominated logs the boxes
+narrow by 0.2-0.6 % (median width 0.04703 -> 0.04692 and 0.03842 -> 0.03821 of the prior).)
 What changed: the q-q remainder of the
 Coriolis and gravity terms bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated
 exactly (1b54bd7), and the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069,
