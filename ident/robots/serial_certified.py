@@ -6,24 +6,40 @@ between the sample instants, zero at both window ends, ``int k = 1`` so rows are
 weighted sum of the logged torques; the regressor side ``[Wc - D, Wc + D]`` encloses the TRUE row ``int k Y dt``
 (of the true, unknown motion), so the true parameters satisfy ``|y - W theta| <= bound`` for some W in it.
 
-**The regressor side**, per sample step j (``q_j`` the true positions at the sample instants, ``M(q)`` the mass
-matrix, ``h(q, v)`` the Coriolis/centrifugal and ``g(q)`` the gravity torques, all per unit standard parameter;
-``Y = M qdd + h + g``):
+**The regressor side** (``q_j`` the true positions at the sample instants, ``M(q)`` the mass matrix, ``h(q, v)`` the
+Coriolis/centrifugal and ``g(q)`` the gravity torques, all per unit standard parameter; ``Y = M qdd + h + g``), in
+Lagrangian form: ``M qdd + h = d/dt (M qd) - dT/dq`` with ``T = qd^T M qd / 2``, so by parts (``k = 0`` at both
+window ends) ``int k Y dt = -int k' M(q) qd dt + int k f2(q, qd) dt`` with ``f2 = g - dT/dq = g + h - Mdot qd``. No
+acceleration and no speed at a sample instant is needed:
 
-* ``int k M(q) qdd``: on each step M is replaced by ``M_j = M(qbar_j)`` (mid-step position), then
-  ``int_step k qdd`` is integrated by parts; summed over the window (``k = 0`` at both ends) this is exactly
-  ``sum_j M_j (k_{j+1} qd_{j+1} - k_j qd_j - k'_j dq_j)``: the true positions' steps ``dq_j`` enter exactly,
-  the speeds only through the DIFFERENCES of M between neighbouring steps (a Coriolis-like term);
-* ``int k (h + g)``: ``int_step |k|`` times the integrand at the mid-step position and a speed estimate; the
-  speed's first-order term is integrated exactly against the kernel (linear on the step): the step's measured mean
-  speed enters the centre, its position error the exact gradient, and only ``qdd_max dt^3 / 12`` times ``|k'|``
-  the radius (:func:`ident.robots.serial_steps.speed_linear`), not the speed estimate's truncation;
+* ``-int k' M(q) qd``: ``k'`` is constant on each step, so it is ``-k'_j int_step M(q) qd``, whose centre is ``M_j
+  dq_j`` (``M_j = M(qbar_j)``, the measured mid-step position, ``dq_j`` the measured step): the position errors
+  enter through the exact gradient of ``sum_j k'_j M_j dq_j``; ``M_j`` against the true mid-chord's through the
+  local ``dM`` (``mass_position``); the path's deviation from its mid value, ``int (M(q(t)) - M(qh*)) qd``,
+  to first order against the chord's antisymmetry (``int (t - t_mid) dt = 0`` on the step: what is left is
+  ``qdd_max dt^3`` small) and to second order with the local Hessian of M (``mass_motion``, times ``|k'|``);
+* ``int k f2``: ``int_step |k|`` times the integrand at the mid-step position and a speed estimate; ``f2`` is
+  quadratic in v with the matrix ``Gamma - Gc`` (``Gc`` the symmetric part of ``dM``: ``Mdot v = sum_ab dM_b/dq_a
+  v_a v_b``); the speed's first-order term is integrated exactly against the kernel (linear on the step): the
+  step's measured mean speed enters the centre, its position error the exact gradient, and only ``qdd_max dt^3 /
+  12`` times ``|k'|`` the radius (:func:`ident.robots.serial_steps.speed_linear`); the q-variation of ``g + h``
+  with its local derivatives, that of ``Mdot v`` with the local Hessian of M against the chord's antisymmetry
+  (:func:`ident.robots.serial_steps.c2_terms`);
+* the derivatives of M: ``dM`` by a second-order one-sided difference (error ``ETA^2 / 3 * 8 M`` + the regressor's
+  stated error over ``ETA``), its second derivatives by mixed differences over the rectangles ``[qh, qh + ETA (e_a
+  + e_k)]``, carried to the step's box with Bernstein's ``|d3 M| <= 8 M`` (:func:`ident.robots.serial_steps.
+  mass_derivatives`);
 * friction, rotor inertia, offsets: ``int k qdd = -sum k'_j dq_j`` (exact), ``int k qd = -int k' q``
   (trapezoid, error ``qdd_max dt^3 / 12`` per step), ``int k = 1``; Coulomb ``sign(qd)`` per step: certain when
   the step's speed bound excludes 0, else ``[-1, 1] int_step |k|``.
 
-The computed row uses the measured positions; speeds are centred secants over ``2 m`` steps (``m`` chosen from
-the spec to balance ``qdd_max m dt`` against ``e / (m dt)``). **Radii** (each term in :attr:`terms`):
+(At 65d4861 and before, ``int k M(q) qdd`` froze M at each step's mid position and summed ``int_step k qdd`` by
+parts: M's variation within each step against ``qdd_max`` and the differences of M between steps against the
+speed secants at the sample instants, both of order ``|dM| |qd| qdd_max dt``, which dominated the radii of fast
+logs with a large stated ``qdd_max``: docs/serial.md has the TX40's log before and after.)
+
+The computed row uses the measured positions; the speed estimate of each step is the secant over the ``2 m - 1``
+steps centred on it (``m`` chosen from the spec to balance ``qdd_max m dt`` against ``e / (m dt)``). **Radii** (each term in :attr:`terms`):
 
 ``position``  the encoder/format error e (``ErrorSpec.position_error``) through the exact gradient of the row's
               discrete functional (summation by parts: ``sum_j e_j |G_j|``, ``G_j`` from ``k'_{j-1} - k'_j``;
@@ -35,8 +51,7 @@ the spec to balance ``qdd_max m dt`` against ``e / (m dt)``). **Radii** (each te
               (2 m - 1) dt`` is at most ``qdd_max (dt^2 + S^2) / (4 S)`` in the step, and its quadratic term in
               the Coriolis part takes the smaller of that bound squared and a mean-square bound, the variance
               ``qdd_max^2 dt^2 / 12`` for m = 1, through Cauchy-Schwarz: :func:`ident.robots.serial_steps.
-              quadratic_speed_weights`), the knot secants' truncation (``qdd_max m dt / 2``), the trapezoid, all
-              from the stated ``qd_max``, ``qdd_max``;
+              quadratic_speed_weights`), the trapezoid, all from the stated ``qd_max``, ``qdd_max``;
 ``coulomb``   sign uncertainty of steps whose speed bound includes 0;
 ``torque``    ``torque_error int|k|`` (+ ``torque_rate dt / 2`` for sample-instant torques, + ``torque_rate
               latency``), ``model``: ``model_error``; ``rounding``: floating-point allowance.

@@ -5,14 +5,16 @@ evaluates them).
 **Per step** j (``[t_j, t_j+1]``, mid-step position ``qh``, speed estimate ``vh``) the regressor is evaluated
 at ``qh``, at ``qh + ETA e_k`` and at ``qh + ETA (e_a + e_b)`` with the arguments of the module docstring of
 :mod:`ident.robots.serial_certified` (gravity, the speed estimate, unit speeds and accelerations: ``2 + 2 n + n (n -
-1) / 2 + n (3 n + 2) + n (n + 1) / 2`` evaluations, each step once): a batch of steps in one call of
+1) / 2 + n (3 n + 2) + n (n + 1) (n + 2) / 2`` evaluations, each step once: at the corners ``qh + ETA (e_a + e_b)``
+also gravity and the mass matrix's columns, for its derivatives): a batch of steps in one call of
 :func:`ident.robots.chain.regressor` for a chain of revolute joints, pinocchio's one at a time otherwise. Only the
 entries a chain can fill are kept (:func:`ident.robots.chain.live_entries`: ``5 n (n + 1)`` of the ``10 n^2``, the
 others zero for every state). Every other operation runs on arrays of many steps at once, in the same arithmetic as
 the per-step reference (:mod:`ident.robots.serial_reference`).
 
-**Per window** the regressor at the window's scaled speed and acceleration is not called again: ``Y(q, v, a) =
-g(q) + h(q, v) + M(q) a`` with ``h`` quadratic in v, so the reference's call ``Y(qh_j, sqrt(K_w) vh_j, u_w)`` is
+**Per window** the regressor at the window's scaled speed and acceleration (``u_w = -k'_w dq_w``: the Lagrangian
+form's mass term) is not called again: ``Y(q, v, a) = g(q) + h(q, v) + M(q) a`` with ``h`` quadratic in v, so the
+reference's call ``Y(qh_j, sqrt(K_w) vh_j, u_w)`` is
 ``g0_j + K_w (f0_j - g0_j) + sum_b Mc_j[b] u_w[b]`` from the step's ``g0 = Y(qh, 0, 0)``, ``f0 = Y(qh, vh, 0)``
 and mass-matrix columns ``Mc[b] = Y(qh, 0, e_b) - g0`` (an identity of the exact functions). Its arithmetic adds
 at most ``2 (n + 5) u`` of ``|g0| + K_w (|f0| + |g0|) + sum_b |Mc[b]| |u_w[b]|`` per (window, step) (``u =
@@ -23,8 +25,8 @@ the per-(window, step) arrays (the rebuilt regressor, the differences of kernel-
 steps: the speed estimates' exact gradients) are formed for a few windows at a time (``memory`` bounds them).
 
 **Steps held**: the per-step arrays of the windows starting within about ``max(L, 256)`` steps, plus the
-``L + 2`` steps the next windows share (moved, not evaluated again): ``8 (max(L, 256) + L) (20 + 3 n) 5 n (n + 1)``
-bytes (:data:`_KEEP`), 51 MB for 6 joints and 73 MB for 7 at L = 400.
+``L + 2`` steps the next windows share (moved, not evaluated again): ``8 (max(L, 256) + L) (18 + 3 n) 5 n (n + 1)``
+bytes (:data:`_KEEP`), 48 MB for 6 joints and 70 MB for 7 at L = 400.
 """
 
 from __future__ import annotations
@@ -36,18 +38,19 @@ from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.processing.weakform import Kernel
 from h4bench.ident.robots.chain import live_entries
 
-__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "inertial_family", "inertial_rows", "local_bounds", "q_remainder",
-           "quadratic_speed_weights", "regressor_one", "robot_chain", "speed_linear", "step_displacements"]
+__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "c2_terms", "inertial_family", "inertial_rows", "local_bounds",
+           "mass_derivatives", "mass_hessian_bound", "q_remainder", "quadratic_speed_weights", "regressor_one",
+           "robot_chain", "speed_linear", "step_displacements", "hessian_quadratic"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
-# the inertial columns' radii by origin (``parts`` of the equation): M(q) within the step, Coriolis + gravity at the
-# mid-step estimate, the speed estimate in the differences of M, and the measurement's exact gradient
-PARTS = ("mass_motion", "coriolis_motion", "speed_motion", "mass_position", "coriolis_position", "speed_position",
-         "gradient_position")
+# the inertial columns' radii by origin (``parts`` of the equation): M(q) along the step against its mid-step value
+# (the term -k' M qd), f2 = g - dT/dq along the step against its value at the mid-step estimate, and the
+# measurement through each (the mid-step position, and the exact gradient of sum_j k'_j M_j dq_j)
+PARTS = ("mass_motion", "coriolis_motion", "mass_position", "coriolis_position", "gradient_position")
 # per-step arrays of (n rows, 10 n columns) the window sums read, and the (n, n rows, 10 n columns) ones
-_KEEP = ("g0", "fg", "af0", "ag0", "A_mot", "A_pos", "H_mot", "Gq", "H_pos", "Cmax", "Dloc", "Ecur", "B_mot", "B_pos",
-         "Eknot", "Ediff", "Mc", "aMc", "Jv", "Jc", "aJc", "Jk", "Jf")
+_KEEP = ("g0", "fg", "af0", "ag0", "c2", "c2mag", "L_mot", "H_mot", "Gq", "H_pos", "Dloc", "Ecur", "Eknot",
+         "Ediff", "Mc", "aMc", "Jv", "Jc", "aJc", "Jk", "Jf")
 
 
 class StepGrid:
@@ -147,24 +150,30 @@ def _regressor_calls(robot, qh, vh) -> dict:
     vk[:, :, 2 + 2 * n:] = vh[:, None, None] - I
     ak = np.zeros((C, n, nk, n))
     ak[:, :, 2:2 + n] = I
-    q_f = qh[:, None, :] + (shifts[fa] + shifts[fb])[None]
-    Q = np.concatenate([at_qh, at_k.reshape(C, n * nk, n), q_f], axis=1).reshape(-1, n)
-    V = np.concatenate([v_qh, vk.reshape(C, n * nk, n), np.broadcast_to(vh[:, None], (C, fa.size, n))],
-                       axis=1).reshape(-1, n)
-    A = np.concatenate([a_qh, ak.reshape(C, n * nk, n), np.zeros((C, fa.size, n))], axis=1).reshape(-1, n)
-    E = at_qh.shape[1] + n * nk + fa.size
+    # per corner qh + ETA (e_a + e_b), a <= b: f (vh, 0), g (0, 0), the mass-matrix columns (0, e_c)
+    nf = 2 + n
+    at_f = np.broadcast_to((qh[:, None, :] + (shifts[fa] + shifts[fb])[None])[:, :, None], (C, fa.size, nf, n))
+    vf = np.zeros((C, fa.size, nf, n))
+    vf[:, :, 0] = vh[:, None]
+    af = np.zeros((C, fa.size, nf, n))
+    af[:, :, 2:] = I
+    Q = np.concatenate([at_qh, at_k.reshape(C, n * nk, n), at_f.reshape(C, -1, n)], axis=1).reshape(-1, n)
+    V = np.concatenate([v_qh, vk.reshape(C, n * nk, n), vf.reshape(C, -1, n)], axis=1).reshape(-1, n)
+    A = np.concatenate([a_qh, ak.reshape(C, n * nk, n), af.reshape(C, -1, n)], axis=1).reshape(-1, n)
+    E = at_qh.shape[1] + n * nk + fa.size * nf
     sh = (5 * n * (n + 1),)
     Y = regressor(ch, Q, V, A, packed=True).reshape((C, E) + sh)
     h0 = at_qh.shape[1]
     Yk = Y[:, h0:h0 + n * nk].reshape((C, n, nk) + sh)  # views: the in-place differences of local_bounds work on them
     pair = np.zeros((C, n, n) + sh)
     pair[:, pa, pb] = Y[:, 2 + n:2 + n + pa.size]
+    Yf = Y[:, h0 + n * nk:].reshape((C, fa.size, nf) + sh)
     fab = np.empty((C, n, n) + sh)
-    fab[:, fa, fb] = Y[:, h0 + n * nk:]
-    fab[:, fb, fa] = Y[:, h0 + n * nk:]
+    fab[:, fa, fb] = Yf[:, :, 0]
+    fab[:, fb, fa] = Yf[:, :, 0]
     return {"g0": Y[:, 0], "f0": Y[:, 1], "ha": Y[:, 2:2 + n], "pair": pair, "Mc": Y[:, 2 + n + pa.size:h0],
             "gk": Yk[:, :, 0], "fk": Yk[:, :, 1], "Mk": Yk[:, :, 2:2 + n], "Vp": Yk[:, :, 2 + n:2 + 2 * n],
-            "Vm": Yk[:, :, 2 + 2 * n:], "fab": fab}
+            "Vm": Yk[:, :, 2 + 2 * n:], "fab": fab, "gab": Yf[:, :, 1], "Mab": Yf[:, :, 2:]}
 
 
 def regressor_one(robot, q, v, a) -> np.ndarray:
@@ -204,8 +213,9 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
     out = {"g0": np.empty((C,) + sh), "f0": np.empty((C,) + sh), "ha": np.empty((C, n) + sh),
            "pair": np.zeros((C, n, n) + sh), "Mc": np.empty((C, n) + sh), "gk": np.empty((C, n) + sh),
            "fk": np.empty((C, n) + sh), "Mk": np.empty((C, n, n) + sh), "Vp": np.empty((C, n, n) + sh),
-           "Vm": np.empty((C, n, n) + sh), "fab": np.empty((C, n, n) + sh)}
-    g0, f0, ha, pair, Mc, gk, fk, Mk, Vp, Vm, fab = out.values()
+           "Vm": np.empty((C, n, n) + sh), "fab": np.empty((C, n, n) + sh),
+           "gab": np.empty((C, n * (n + 1) // 2) + sh), "Mab": np.empty((C, n * (n + 1) // 2, n) + sh)}
+    g0, f0, ha, pair, Mc, gk, fk, Mk, Vp, Vm, fab, gab, Mab = out.values()
     for c in range(C):
         qq, v = qh[c], vh[c]
         vp, vm = v + I, v - I  # rows b: v + e_b, v - e_b
@@ -227,8 +237,13 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
                 Vm[c, k, b] = Y(model, data, qk, vm[b], Z)
         for a in range(n):  # the corners of the q-Hessian's forward differences (a == b: qq + 2 ETA e_a)
             for b in range(a, n):
-                fab[c, a, b] = Y(model, data, qq + (shifts[a] + shifts[b]), v, Z)
+                qab = qq + (shifts[a] + shifts[b])
+                fab[c, a, b] = Y(model, data, qab, v, Z)
                 fab[c, b, a] = fab[c, a, b]
+                P = a * n - a * (a - 1) // 2 + b - a  # the pair's index in np.triu_indices(n) order
+                gab[c, P] = Y(model, data, qab, Z, Z)
+                for d in range(n):
+                    Mab[c, P, d] = Y(model, data, qab, Z, I[d])
     return out
 
 
@@ -333,6 +348,102 @@ def step_displacements(dq, e0, e1, ebar, qddm, dt):
     return dq_mean, dq_max
 
 
+def mass_derivatives(Mc, Mk, gk, Mab, gab, qh, geo):
+    """The mass matrix's first and second q-derivatives at a step's mid position ``qh`` from the regressor at
+    ``qh``, ``qh + ETA e_k`` and ``qh + ETA (e_a + e_k)`` (arrays over C steps, the entries last; the columns of M are
+    ``Y(q, 0, e_b) - Y(q, 0, 0)``): Mc (C, b, ...) at qh (gravity subtracted); Mk (C, k, b, ...), gk (C, k, ...); Mab
+    (C, P, b, ...), gab (C, P, ...) at the pairs a <= k in ``np.triu_indices(n)`` order.
+    Returns ``(dM, eps, HB0)``, HB0 (C, P, b, ...) per pair (a, k):
+
+    * ``dM[k, b] = (4 M(qh + ETA e_k) - 3 M(qh) - M(qh + 2 ETA e_k)) / (2 ETA)``, second-order accurate:
+      ``|dM - dM_true| <= eps = ETA^2 / 3 * 8 M`` (its Taylor remainder, Bernstein's third derivative ``8 M``)
+      ``+ 8 (PIN_REL + 16 u) (M + 2 g) / (2 ETA)`` (the regressor's stated error on the eight values, each of
+      magnitude at most ``M + 2 g`` per unit parameter, and the formula's rounding) ``+ 8 M ulp / ETA`` (the
+      positions ``qh + ETA e_k`` rounded: unequal spacings);
+    * ``HB0[a, k, b] >= |d2 M_b / dq_a dq_k (xi)|`` at some xi of the rectangle ``[qh, qh + ETA (e_a + e_k)]`` (the
+      mixed difference, the mean-value theorem twice, as :func:`q_remainder`'s), with the same allowances over
+      ``ETA^2`` (``1e-9`` of it for the mixed spacings, ``3 sup|dM| ulp / ETA^2`` for the diagonal ones); at
+      another point zeta add ``8 M |zeta - xi|_1`` (:func:`mass_hessian_bound`)."""
+    eta, mbar = ETA, geo["M"]
+    n = Mc.shape[1]
+    fa, fb = np.triu_indices(n)
+    diag = np.flatnonzero(fa == fb)  # the pairs (k, k)
+    M1 = Mk - gk[:, :, None]
+    M2 = Mab - gab[:, :, None]  # a new array, C-contiguous (Mab is a view into the regressor's output)
+    dM = (4.0 * M1 - 3.0 * Mc[:, None] - M2[:, diag]) / (2 * eta)
+    ulp = np.spacing(np.max(np.abs(qh), axis=1) + 4 * eta).reshape((-1,) + (1,) * (Mk.ndim - 1))
+    grow = 1 + 8 * U
+    vmag = mbar + 2 * geo["g"]  # |Y(q, 0, e_b)| + |Y(q, 0, 0)| per unit parameter
+    eps = ((eta * eta / 3) * 8 * mbar + (PIN_REL + 16 * U) * 8 * vmag / (2 * eta) + 8 * mbar * ulp / eta) * grow
+    H = M2  # in place, per pair a <= k: M(qh + ETA (e_a + e_k)) - M(qh + ETA e_a) - M(qh + ETA e_k) + M(qh)
+    H -= M1[:, fa]
+    H -= M1[:, fb]
+    H += Mc[:, None]
+    H = np.abs(H, out=H)
+    H *= (1 + 1e-9) * grow / (eta * eta)
+    H += (((PIN_REL + 16 * U) * 4 * vmag + 3 * 2 * mbar * ulp) * grow / (eta * eta))
+    return dM, eps, H
+
+
+def mass_hessian_bound(HB0, dq_max, mbar):
+    """``HB`` (C, P, b, ...): ``|d2 M_b / dq_a dq_k|`` per pair a <= k anywhere in the step's box ``|q - qh| <=
+    dq_max``: HB0 of :func:`mass_derivatives` plus ``8 M`` times the l1 distance from its rectangle, ``sum dq_max + 4
+    ETA`` (in place)."""
+    HB0 += (8 * mbar * (np.sum(dq_max, axis=1) + 4 * ETA) * (1 + 8 * U)).reshape((-1,) + (1,) * (HB0.ndim - 1))
+    return HB0
+
+
+def _pair_sum(HB, z):
+    """``sum_b HB[:, P, b] z_b`` (C, P, ...), in index order."""
+    ex = (None,) * (HB.ndim - 3)
+    return np.sum(HB * z[(slice(None), None, slice(None)) + ex], axis=2)
+
+
+def _pair_contract(tz, x, y):
+    """``sum_ak t[a, k] x_a y_k`` with ``t`` symmetric in (a, k) given per pair a <= k (tz (C, P, ...)), in index
+    order: the pair (a, k) stands for both orders."""
+    n = x.shape[1]
+    fa, fb = np.triu_indices(n)
+    coef = x[:, fa] * y[:, fb] + np.where(fa != fb, x[:, fb] * y[:, fa], 0.0)
+    return np.sum(tz * coef[(slice(None), slice(None)) + (None,) * (tz.ndim - 2)], axis=1)
+
+
+def hessian_quadratic(HB, x, w):
+    """``sum_klb HB[k, l, b] x_k x_l w_b`` per step (HB (C, P, b, ...) per pair k <= l, x, w (C, n))."""
+    return _pair_contract(_pair_sum(HB, w), x, x)
+
+
+def c2_terms(HB, vmax, st, ebar, dq_max, qddm, mbar, dt):
+    """The q-variation of ``c2 = Mdot(q, v) v = sum_ab dM_b/dq_a v_a v_b`` over a step against its value at the
+    measured mid position qh (per step: HB (C, a, k, b, F) of :func:`mass_hessian_bound`, vmax (C, n) the step's speed
+    bound, st (C, n) the true step speed's, ebar, dq_max (C, n) of :func:`step_displacements`). Returns ``(pos, mot,
+    slope)``, each (C, F): per unit kernel weight, the parts of the mid position's error and of the motion, and per
+    unit ``|k'|`` the chord's.
+
+    ``c2(q(t), v) - c2(qh, v) = sum_k D_k(qh, v) (q - qh)_k + R``, ``D_k = dc2/dq_k = sum_ab d2 M_b/dq_a dq_k v_a
+    v_b``: over the step's box ``|D_k| <= DB_k = sum_ab HB_akb vmax_a vmax_b`` (HB of :func:`mass_hessian_bound`),
+    ``|dD_k / dv_a| <= DV_ka = sum_b (HB_akb + HB_bka) vmax_b``,
+    and ``|R| <= 4 M (sum vmax)^2 (sum dq_max)^2`` (Bernstein: ``|d3 M| <= 8 M``). With ``q - qh = (t - t_mid) s* + r(t)
+    + eps`` (:func:`step_displacements`): the mid position's error ``DB_k ebar_k`` (pos); the chord against the kernel
+    ``D_k(qh, s*) s*_k int k (t - t_mid) = D_k s*_k k' dt^3 / 12`` (slope) plus ``(D_k(v(t)) - D_k(s*)) (t - t_mid)
+    s*_k``, ``|v_a - s*_a| <= qdd_max_a ((t - t_mid)^2 + dt^2 / 4) / dt``, ``int k |t - t_mid| |v_a - s*_a| <= max k 3
+    qdd_max_a dt^3 / 32 <= 2 K_w 3 qdd_max_a dt^2 / 32`` (k >= 0 linear on the step), the chord's remainder ``int k
+    |D_k| |r_k| <= K_w DB_k qdd_max_k dt^2 / 12`` and R (mot)."""
+    ex = (slice(None),) + (None,) * (HB.ndim - 3)  # (C,) over (C, entries)
+    # every term is a sum_akb HB[a, k, b] x_a y_k z_b: the b-sums first (per pair a <= k), in index order
+    cq = np.broadcast_to(qddm * (2 * 3 * dt * dt / 32), vmax.shape)
+    tv, tc = _pair_sum(HB, vmax), _pair_sum(HB, cq)
+    grow = 1 + 16 * U
+    vmx = np.sum(vmax, axis=1)
+    pos = _pair_contract(tv, vmax, ebar)  # sum_k DB_k ebar_k
+    slope = _pair_contract(tv, vmax, st)
+    mot = _pair_contract(tv, vmax, np.broadcast_to(qddm * (dt * dt / 12), vmax.shape))
+    # sum_ka DV_ka st_k c_a, DV_ka = sum_b (HB[a, k, b] + HB[b, k, a]) vmax_b
+    mot += _pair_contract(tv, cq, st) + _pair_contract(tc, vmax, st)
+    mot += (4 * mbar * vmx * vmx * np.sum(dq_max, axis=1) ** 2)[ex]
+    return pos * grow, mot * grow, slope * ((dt**3 / 12) * grow)
+
+
 def _bound(d, c, mag, flt):
     """``|d| + c + flt (mag + |d| ETA)`` evaluated in that order, overwriting d (with ``mag + x`` as ``x + mag``:
     the same float)."""
@@ -347,9 +458,10 @@ def _bound(d, c, mag, flt):
 
 def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
     """The local data and radii aggregates of steps ``j0 .. j1 - 1`` (the per-step bounds of
-    :mod:`ident.robots.serial_certified`), each (C, n, 10 n) or (C, n, n, 10 n) for C = j1 - j0 steps:
-    ``g0``, ``f0``, ``Mc``, ``dlt``, ``A_mot``, ``A_pos``, ``H_mot``, ``H_pos``, ``Cmax``, ``Dloc``, ``Ecur``,
-    ``Jv`` (the same arithmetic as the per-step reference, batched)."""
+    :mod:`ident.robots.serial_certified`), each (C, F), (C, n, F) or (C, n, n, F) for C = j1 - j0 steps and the F
+    live entries: ``g0``, ``f0``, ``Mc``, ``dlt``, ``c2`` (``Mdot(qh, vh) vh``), ``c2mag``, ``L_mot``, ``H_mot``,
+    ``Gq``, ``H_pos``, ``Dloc``, ``Ecur``, ``Jv`` (``d f2 / dv``) and the speed-linear terms (the same arithmetic as
+    the per-step reference, batched)."""
     J = np.arange(j0, j1)
     eta, dt, n = ETA, grid.dt, grid.n
     vh = grid.vh[J]
@@ -363,78 +475,94 @@ def local_bounds(robot, geo, grid: StepGrid, j0: int, j1: int) -> dict:
         for b in range(a + 1, n):
             gam[:, a, b] = gam[:, b, a] = 0.5 * (p["pair"][:, a, b] - g0 - ha[:, a] - ha[:, b])
     Mc = p["Mc"] - g0[:, None]  # (s, b, i, c): column b of M per unit parameter
-    Jv = 2 * np.einsum("sabf,sb->saf", gam, vh)  # exact: h is quadratic in v
+    Jh = 2 * np.einsum("sabf,sb->saf", gam, vh)  # dh/dv, exact: h is quadratic in v
     mag = np.abs(f0) + np.abs(g0)
     Jq = (p["fk"] - f0[:, None]) / eta
-    # in place, the reference's operations in its order: dM = (Mk - gk - Mc) / eta, only |dM| is read
-    dM = p["Mk"]
-    dM -= p["gk"][:, :, None]
-    dM -= Mc[:, None]
-    dM /= eta
-    dJv = p["Vp"]  # (s, k, a, i, c): (0.5 (Vp - Vm) - Jv) / eta, only |dJv| is read
+    # the mass matrix's derivatives: dM second-order accurate (its error eps), the second derivatives' bounds HB0
+    dM, eps, HB0 = mass_derivatives(Mc, p["Mk"], p["gk"], p["Mab"], p["gab"], grid.qbar[J], geo)
+    dJv = p["Vp"]  # (s, k, a, i, c): (0.5 (Vp - Vm) - Jh) / eta, only |dJv| is read
     dJv -= p["Vm"]
     dJv *= 0.5
-    dJv -= Jv[:, None]
+    dJv -= Jh[:, None]
     dJv /= eta
     flt = 4 * PIN_REL / eta
+    # the Lagrangian form's velocity term c2 = Mdot v = sum_kb dM[k, b] v_k v_b (a quadratic form in v whose matrix
+    # is the symmetric part Gc of dM), and f2 = g + h - c2 (= g - dT/dq): its matrix gam - Gc, its speed gradient
+    Gc = 0.5 * (dM + np.swapaxes(dM, 1, 2))
+    gam2 = gam - Gc
+    Jv = 2 * np.einsum("sabf,sb->saf", gam2, vh)
+    c2 = np.einsum("sabf,sa,sb->sf", Gc, vh, vh)
+    avh = np.abs(vh)
+    c2mag = np.einsum("sabf,sa,sb->sf", np.abs(Gc), avh, avh)
+    epsG = 0.5 * (eps + np.swapaxes(eps, 1, 2))  # dM's error, hence Gc's (symmetrised)
     # bounds on the true derivatives (forward-difference truncation by Bernstein, pinocchio's float error)
-    vs = np.sum(np.abs(vh), axis=1)
+    vs = np.sum(avh, axis=1)
     c4 = (slice(None), None, None)  # (C,) over (C, n, F)
     JqB = np.abs(Jq) + (eta / 2 * 4 * (geo["gamma"] * vs**2 + geo["g"]))[c4] + flt * (mag[:, None] + np.abs(Jq) * eta)
-    dMB = _bound(dM, 2 * eta * geo["M"], 2.0, flt)  # |dM| + 2 eta M + flt (2 + |dM| eta)
+    dMB = np.abs(dM) + eps  # |dM_true| at qh
     dJvB = _bound(dJv, (4 * eta * geo["gamma"] * (vs + 1))[c4 + (None,)], 2 * mag[:, None, None], flt)
     # speeds and position boxes of the step (true motion)
     ebar = grid.ebar[J]
     ev_max = grid.ev_mot_max + grid.ev_pos[J]
+    vmax = avh + ev_max  # bound on |v(t)| over the step
     qddm = grid.qddm
-    dq_mean, dq_max = step_displacements(grid.dq[J], grid.e[J], grid.e[J + 1], ebar, qddm, dt)
+    e0, e1 = grid.e[J], grid.e[J + 1]
+    dq_mean, dq_max = step_displacements(grid.dq[J], e0, e1, ebar, qddm, dt)
     rem_qq = q_remainder(p["fab"], p["fk"], f0, grid.qbar[J], vh, ev_max, dq_max, geo)
     aY = np.abs(p["ha"])
     gmag = np.abs(p["pair"])  # filled for a < b only: symmetric
     gmag += np.swapaxes(gmag, 1, 2).copy()
     gmag += aY[:, :, None] + aY[:, None, :]
     gmag += 3 * np.abs(g0)[:, None, None]
-    lin = speed_linear(Jv, gam, gmag, vh, grid.dq[J], grid.e[J], grid.e[J + 1], qddm, dt)
-    del p, Jq, dM, dJv, aY, gmag
+    absGc = np.abs(Gc)
+    lin = speed_linear(Jv, np.abs(gam) + absGc, gmag, vh, grid.dq[J], e0, e1, qddm, dt)
+    lin["Jf"] += 4 * (n + 2) * U * c2mag  # c2's own products and sums
+    del p, Jq, dJv, aY, gmag, dM
     c3 = (slice(None), None)  # (C,) over (C, F)
-    # M(q(t)) qdd(t) against M(qh) qdd(t): local first order + Bernstein second order (Taylor: 1/2 of 4 M)
-    dMq = np.einsum("skbf,b->skf", dMB, qddm)
-    A_mot = (np.einsum("skf,sk->sf", dMq, dq_mean)
-             + (2 * geo["M"] * qddm.sum() * np.sum(dq_max, axis=1) ** 2)[c3])
-    A_pos = np.einsum("skf,sk->sf", dMq, ebar)
-    # (h + g)(q(t), qd(t)) against (h + g)(qh, vh) (the reference's comments)
-    absG = np.abs(gam)
+    mbar = geo["M"]
+    # -k' int_step M(q) qd against -k' M(qh) dq: the path's deviation from the mid-step value, to first order with
+    # dM (at the true mid-chord: + 4 M ebar) against the chord's antisymmetry, second order by Bernstein
+    st = (np.abs(grid.dq[J]) + e0 + e1) / dt * (1 + 4 * U)  # bound on the true step speed |s*|
+    P1 = (np.einsum("sk,b->skb", st, qddm * (3 * dt**3 / 32))
+          + np.einsum("k,sb->skb", qddm * (dt**3 / 12), st + qddm * (dt / 2)))
+    dqx = st * (dt / 2) + qddm * (dt * dt / 8)
+    HB = mass_hessian_bound(HB0, dq_max, mbar)
+    del HB0
+    L_mot = np.einsum("skbf,skb->sf", dMB, P1) + (4 * mbar * np.sum(ebar, axis=1) * np.sum(P1, axis=(1, 2)))[c3]
+    L_mot += 0.5 * hessian_quadratic(HB, dqx, st * dt + qddm * (dt * dt / 3))
+    # f2(q(t), qd(t)) against f2(qh, vh): g + h with the local first order in q, the q-q remainder (local Hessian),
+    # the q-v cross term; c2's q-variation by Bernstein (|dc2/dq_k| <= 4 M (sum|v|)^2); dM's forward-difference
+    # error in c2 over the step's speeds; the v-quadratic part exactly (Gq, Q_pos: matrix gam - Gc)
+    absG2 = np.abs(gam2)
     mot = grid.ev_mot_max
-    Gq = np.einsum("sabf,a,b->sf", absG, qddm, qddm)  # the quadratic speed term's, per kernel weight (window sums)
+    Gq = np.einsum("sabf,a,b->sf", absG2, qddm, qddm)  # the quadratic speed term's, per kernel weight (window sums)
     dvs, dqs = np.sum(ev_max, axis=1), np.sum(dq_max, axis=1)
-    rem = (rem_qq + np.einsum("skaf,sk,sa->sf", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3])
-    H_mot = np.einsum("skf,sk->sf", JqB, dq_mean) + rem  # Jv (v - vh): speed_linear; Gq: the rows
+    c2p, c2m, c2k = c2_terms(HB, vmax, st, ebar, dq_max, qddm, mbar, dt)
+    del HB
+    rem = (rem_qq + np.einsum("skaf,sk,sa->sf", dJvB, dq_max, ev_max) + (2 * geo["gamma"] * dvs * dvs * dqs)[c3]
+           + c2m)
+    Cfd = np.einsum("sabf,sa,sb->sf", epsG, vmax, vmax)
+    H_mot = np.einsum("skf,sk->sf", JqB, dq_mean) + rem + Cfd  # Jv (v - vh): speed_linear; Gq: the rows
     # Q_all - Q_mm without the cancellation: ev_max = mot + ev_pos, so the difference is a sum of non-negative
     # products (|G| mot ev_pos twice and |G| ev_pos ev_pos)
     pos = grid.ev_pos[J]
-    Q_pos = (np.einsum("sabf,a,sb->sf", absG, mot, pos) + np.einsum("sabf,sa,b->sf", absG, pos, mot)
-             + np.einsum("sabf,sa,sb->sf", absG, pos, pos))
-    H_pos = np.einsum("skf,sk->sf", JqB, ebar) + Q_pos
-    dlt = np.einsum("skbf,sk->sbf", dMB, ebar) + (2 * geo["M"] * np.sum(ebar, axis=1) ** 2)[c4]
-    e = grid.e
-    return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "A_mot": A_mot, "A_pos": A_pos, "H_mot": H_mot, "Gq": Gq,
-            "H_pos": H_pos, "Cmax": dlt.max(axis=1),
-            "Dloc": np.einsum("sbf,sb->sf", dlt, np.abs(grid.dq[J]) + e[J] + e[J + 1]),
-            "Ecur": np.einsum("sbf,sb->sf", np.abs(Mc), e[J]), "Jv": Jv, **lin}
+    Q_pos = (np.einsum("sabf,a,sb->sf", absG2, mot, pos) + np.einsum("sabf,sa,b->sf", absG2, pos, mot)
+             + np.einsum("sabf,sa,sb->sf", absG2, pos, pos))
+    H_pos = np.einsum("skf,sk->sf", JqB, ebar) + Q_pos + c2p
+    dlt = np.einsum("skbf,sk->sbf", dMB, ebar) + (2 * mbar * np.sum(ebar, axis=1) ** 2)[c4]
+    L_mot += c2k  # c2's q-variation along the chord against the kernel's slope, |k'| too
+    return {"g0": g0, "f0": f0, "Mc": Mc, "dlt": dlt, "c2": c2, "c2mag": c2mag, "L_mot": L_mot, "H_mot": H_mot,
+            "Gq": Gq, "H_pos": H_pos, "Dloc": np.einsum("sbf,sb->sf", dlt, np.abs(grid.dq[J]) + e0 + e1),
+            "Ecur": np.einsum("sbf,sb->sf", np.abs(Mc), e0), "Jv": Jv, **lin}
 
 
-def _sample_terms(grid: StepGrid, j0: int, cur: dict, Mc_prev, dlt_prev) -> dict:
-    """The sample-instant aggregates of samples j0 .. j0 + C - 1 (between steps j - 1 and j): ``dMhat``,
-    ``B_mot``, ``B_pos``, ``Eknot``, ``Ediff``; Mc_prev, dlt_prev : the two arrays of steps j0 - 1 .. j0 + C - 2."""
+def _sample_terms(grid: StepGrid, j0: int, cur: dict, Mc_prev) -> dict:
+    """The sample-instant aggregates of samples j0 .. j0 + C - 1 (between steps j - 1 and j): ``Eknot``,
+    ``Ediff``; Mc_prev : the mass-matrix columns of steps j0 - 1 .. j0 + C - 2."""
     J = np.arange(j0, j0 + cur["Mc"].shape[0])
-    Mc, dlt = cur["Mc"], cur["dlt"]
-    dMhat = Mc_prev - Mc
-    dMj = np.abs(dMhat) + dlt_prev + dlt  # bound on |M_{j-1} - M_j| at the true positions
     e = grid.e[J]
-    return {"dMhat": dMhat, "B_mot": np.einsum("sbf,b->sf", dMj, grid.ew_mot),
-            "B_pos": np.einsum("sbf,sb->sf", dlt_prev + dlt, grid.ew_pos[J]),
-            "Eknot": np.einsum("sbf,sb->sf", np.abs(Mc_prev), e),
-            "Ediff": np.einsum("sbf,sb->sf", np.abs(Mc_prev - Mc), e)}
+    return {"Eknot": np.einsum("sbf,sb->sf", np.abs(Mc_prev), e),
+            "Ediff": np.einsum("sbf,sb->sf", np.abs(Mc_prev - cur["Mc"]), e)}
 
 
 class _StepBuffer:
@@ -448,7 +576,6 @@ class _StepBuffer:
         F = live_entries(n).size
         self.arr = {k: np.empty((capacity, n, F) if k in ("Mc", "aMc", "Jv") else (capacity, F)) for k in _KEEP}
         self.b0, self.size = 0, 0
-        self.last_dlt = None  # (n, F): dlt of step b0 + size - 1 (for the next step's sample terms)
 
     def advance(self, first: int, end: int) -> None:
         """Hold steps ``first .. end - 1`` (first >= the held first step, end - first <= capacity)."""
@@ -462,20 +589,16 @@ class _StepBuffer:
             j1 = min(end, j0 + self.batch)
             cur = local_bounds(self.robot, self.geo, self.grid, j0, j1)
             C = j1 - j0
-            Mc, dlt = cur["Mc"], cur["dlt"]
+            Mc = cur["Mc"]
             held = j0 - self.b0
             if held:
                 Mc_prev = np.concatenate([self.arr["Mc"][held - 1: held].reshape((1,) + Mc.shape[1:]), Mc[:-1]])
-                dlt_prev = np.concatenate([self.last_dlt[None], dlt[:-1]])
             else:  # no step before: the first step's sample terms are never read
                 Mc_prev = np.concatenate([np.full_like(Mc[:1], np.nan), Mc[:-1]])
-                dlt_prev = np.concatenate([np.full_like(dlt[:1], np.nan), dlt[:-1]])
-            cur.update(_sample_terms(self.grid, j0, {"Mc": Mc, "dlt": dlt}, Mc_prev, dlt_prev))
+            cur.update(_sample_terms(self.grid, j0, {"Mc": Mc}, Mc_prev))
             cur.update(fg=cur["f0"] - cur["g0"], af0=np.abs(cur["f0"]), ag0=np.abs(cur["g0"]), aMc=np.abs(Mc))
-            del cur["dMhat"]
             for key, a in self.arr.items():
                 a[held: held + C] = cur[key].reshape((C,) + a.shape[1:])
-            self.last_dlt = dlt[-1]
             self.size = held + C
 
 
@@ -517,7 +640,7 @@ def _weights(kern: Kernel) -> dict:
 def _correlations(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: int) -> dict:
     """The window sums of per-step arrays with kernel weights (BLAS over strided views), windows ``starts``
     (all held by ``buf``), and the per-(window, step) accelerations ``u`` (R, L, n). Returns (R, F) arrays."""
-    k, K1, akp, dkp = wt["k"], wt["K1"], wt["akp"], wt["dkp"]
+    K1, akp, dkp = wt["K1"], wt["akp"], wt["dkp"]
     L = K1.size
     R, s0 = starts.size, int(starts[0])
     rel = s0 - buf.b0
@@ -525,21 +648,16 @@ def _correlations(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: in
     def V(key, off=0, length=L):
         return _view(buf.arr[key], rel + off, R, stride, length)
 
-    # the sample-instant secants w_j and the steps dq_j of each window: u_w = k_w+1 w_w+1 - k_w w_w - k'_w dq_w
-    kw = k[:, None] * _view(grid.w, s0, R, stride, L + 1)
-    x = kw[:, 1:] - kw[:, :-1]
-    u = x - wt["kp"][:, None] * _view(grid.dq, s0, R, stride, L)
-    xs = np.abs(x).sum(axis=2)  # (R, L)
-    out = {"mass_motion": K1 @ V("A_mot"),
+    # the mass term of the Lagrangian form, -k'_w M_w dq_w: the regressor's acceleration argument
+    u = -wt["kp"][:, None] * _view(grid.dq, s0, R, stride, L)
+    out = {"mass_motion": akp @ V("L_mot"),
            "coriolis_motion": K1 @ V("H_mot") + akp @ V("Jk") + wt["cq"] @ V("Gq"),
-           "speed_motion": k[:L] @ V("B_mot"),
-           "mass_position": K1 @ V("A_pos") + np.matmul(xs[:, None, :], V("Cmax"))[:, 0] + akp @ V("Dloc"),
-           "coriolis_position": K1 @ V("H_pos"), "speed_position": k[:L] @ V("B_pos"),
+           "mass_position": akp @ V("Dloc"), "coriolis_position": K1 @ V("H_pos"),
            # measurement through the exact gradient of sum_j k'_j M_j dq_j (sample jj of the window)
            "gradient_position": dkp[0] * V("Ecur", 0, 1)[:, 0] + dkp[1:L] @ V("Eknot", 1, L - 1)
            + akp[1:L] @ V("Ediff", 1, L - 1) + dkp[L] * V("Eknot", L, 1)[:, 0],
-           "gK": (K1 - 1.0) @ V("g0") + K1 @ V("Jc"),
-           "mag": np.abs(K1 - 1.0) @ V("ag0") + K1 @ V("aJc"), "Jf": K1 @ V("Jf"),
+           "gK": (K1 - 1.0) @ V("g0") + K1 @ V("Jc") - K1 @ V("c2"),
+           "mag": np.abs(K1 - 1.0) @ V("ag0") + K1 @ V("aJc") + K1 @ V("c2mag"), "Jf": K1 @ V("Jf"),
            "rsum": (1.0 + K1) @ V("ag0") + K1 @ V("af0")}
     return out, u
 
@@ -547,14 +665,13 @@ def _correlations(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: in
 def _pair_terms(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: int, u) -> dict:
     """The per-(window, step) terms of windows ``starts``: the regressor at the window's scaled speed and
     acceleration (its window sum ``Wi``, the sum of its magnitudes ``mag``, the reconstruction's magnitudes
-    ``rsum``) and the speed estimates' gradient terms (``cG`` of the Coriolis part, ``sG`` of the differences of
-    M). Returns (R, F) arrays; u : (R, L, n) the windows' accelerations."""
-    k, K1 = wt["k"], wt["K1"]
+    ``rsum``) and the speed estimates' gradient term (``cG``). Returns (R, F) arrays; u : (R, L, n) the windows'
+    accelerations."""
+    K1 = wt["K1"]
     L = K1.size
     R, rel = starts.size, int(starts[0]) - buf.b0
-    m, dt = grid.m, grid.dt
+    dt = grid.dt
     A = buf.arr
-    n, F = A["Mc"].shape[1:]
 
     def V(key, off=0, length=L):
         return _view(A[key], rel + off, R, stride, length)
@@ -567,12 +684,6 @@ def _pair_terms(buf: _StepBuffer, grid: StepGrid, wt: dict, starts, stride: int,
     # the speed's linear term at the true step speeds (speed_linear): sum_j K1_j Jv_j (delta_{j+1} - delta_j) / dt,
     # summed by parts
     out["cG"] = _shift_diff_sum(K1[:, None, None] * V("Jv"), _view(grid.e, int(starts[0]), R, stride, L + 1), 1) / dt
-    # the sample-instant secants w_j in sum_j k_j w_j (M_{j-1} - M_j): (delta_{j+m} - delta_{j-m}) / (2 m dt)
-    Mw = V("Mc", -1, L + 2)
-    dMhat = np.subtract(Mw[:, :-1], Mw[:, 1:])
-    dMhat *= k[:, None, None]
-    out["sG"] = _shift_diff_sum(dMhat, _view(grid.e, int(starts[0]) - m, R, stride, L + 2 * m + 1),
-                                2 * m) / (2 * m * dt)
     return out
 
 
@@ -629,7 +740,6 @@ class _KernelRows:
             for name in PARTS:
                 out[name][rows] = cor[name]
             out["coriolis_position"][rows] += pair["cG"]
-            out["speed_position"][rows] += pair["sG"]
         self.done = upto
 
     def result(self, n: int):
