@@ -369,16 +369,18 @@ def mass_derivatives(Mc, Mk, gk, Mab, gab, qh, geo):
     fa, fb = np.triu_indices(n)
     diag = np.flatnonzero(fa == fb)  # the pairs (k, k)
     M1 = Mk - gk[:, :, None]
-    M2 = Mab - gab[:, :, None]  # a new array, C-contiguous (Mab is a view into the regressor's output)
-    dM = (4.0 * M1 - 3.0 * Mc[:, None] - M2[:, diag]) / (2 * eta)
+    dM = (4.0 * M1 - 3.0 * Mc[:, None] - (Mab[:, diag] - gab[:, diag, None])) / (2 * eta)
     ulp = np.spacing(np.max(np.abs(qh), axis=1) + 4 * eta).reshape((-1,) + (1,) * (Mk.ndim - 1))
     grow = 1 + 8 * U
     vmag = mbar + 2 * geo["g"]  # |Y(q, 0, e_b)| + |Y(q, 0, 0)| per unit parameter
     eps = ((eta * eta / 3) * 8 * mbar + (PIN_REL + 16 * U) * 8 * vmag / (2 * eta) + 8 * mbar * ulp / eta) * grow
-    H = M2  # in place, per pair a <= k: M(qh + ETA (e_a + e_k)) - M(qh + ETA e_a) - M(qh + ETA e_k) + M(qh)
-    H -= M1[:, fa]
-    H -= M1[:, fb]
-    H += Mc[:, None]
+    # per pair a <= k: M(qh + ETA (e_a + e_k)) - M(qh + ETA e_a) - M(qh + ETA e_k) + M(qh), as Mab - (gab + M1_a +
+    # M1_k - Mc) in one buffer
+    S = M1[:, fa]
+    S += M1[:, fb]
+    S -= Mc[:, None]
+    S += gab[:, :, None]
+    H = np.subtract(Mab, S, out=S)
     H = np.abs(H, out=H)
     H *= (1 + 1e-9) * grow / (eta * eta)
     H += (((PIN_REL + 16 * U) * 4 * vmag + 3 * 2 * mbar * ulp) * grow / (eta * eta))
