@@ -67,8 +67,9 @@ class _Steps(StepGrid):
             for b in range(a, n):
                 qab = qh + (eta * I[a] + eta * I[b])
                 fab[a, b] = fab[b, a] = Y(qab, vh, Z)
-                gab.append(Y(qab, Z, Z))
-                Mab.append([Y(qab, Z, I[c]) for c in range(n)])
+                if a:  # the mass pairs (serial_steps.mass_pairs): M does not depend on the first joint
+                    gab.append(Y(qab, Z, Z))
+                    Mab.append([Y(qab, Z, I[c]) for c in range(n)])
         gab, Mab = np.array(gab), np.array(Mab)
         Mk = np.empty((n, n) + g0.shape)
         gks = np.empty((n,) + g0.shape)

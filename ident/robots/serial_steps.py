@@ -38,9 +38,9 @@ from h4bench.ident.numerics.interval import U, up
 from h4bench.ident.processing.weakform import Kernel
 from h4bench.ident.robots.chain import live_entries
 
-__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "c2_terms", "inertial_family", "inertial_rows", "local_bounds",
-           "mass_derivatives", "mass_hessian_bound", "q_remainder", "quadratic_speed_weights", "regressor_one",
-           "robot_chain", "speed_linear", "step_displacements", "hessian_quadratic"]
+__all__ = ["ETA", "PARTS", "PIN_REL", "StepGrid", "c2_terms", "hessian_quadratic", "inertial_family", "inertial_rows",
+           "local_bounds", "mass_derivatives", "mass_hessian_bound", "mass_pairs", "q_remainder",
+           "quadratic_speed_weights", "regressor_one", "robot_chain", "speed_linear", "step_displacements"]
 
 ETA = 1e-4  # rad: forward-difference step of the local q-derivatives (its truncation is bounded in the radii)
 PIN_REL = 1e-12  # stated allowance for pinocchio's floating-point error, relative to the magnitudes summed
@@ -130,7 +130,6 @@ def _regressor_calls(robot, qh, vh) -> dict:
     C, n = qh.shape
     I = np.eye(n)
     pa, pb = np.triu_indices(n, 1)
-    fa, fb = np.triu_indices(n)
     shifts = ETA * I
     qk = qh[:, None, :] + shifts[None]  # (C, k, n): qh + ETA e_k
     # (q, v, a) of each evaluation, evaluations at one position together (the chain shares their kinematics): g0,
@@ -150,27 +149,35 @@ def _regressor_calls(robot, qh, vh) -> dict:
     vk[:, :, 2 + 2 * n:] = vh[:, None, None] - I
     ak = np.zeros((C, n, nk, n))
     ak[:, :, 2:2 + n] = I
-    # per corner qh + ETA (e_a + e_b), a <= b: f (vh, 0), g (0, 0), the mass-matrix columns (0, e_c)
+    # per corner qh + ETA (e_a + e_b), a <= b: f (vh, 0); at the corners of the mass pairs (1 <= a <= b) also
+    # g (0, 0) and the mass-matrix columns (0, e_c): first the n corners (0, b), then the mass pairs' blocks
+    ma, mb = mass_pairs(n)
     nf = 2 + n
-    at_f = np.broadcast_to((qh[:, None, :] + (shifts[fa] + shifts[fb])[None])[:, :, None], (C, fa.size, nf, n))
-    vf = np.zeros((C, fa.size, nf, n))
+    at_0 = qh[:, None, :] + (shifts[0] + shifts)[None]  # (C, b, n): the corners (0, b)
+    at_f = np.broadcast_to((qh[:, None, :] + (shifts[ma] + shifts[mb])[None])[:, :, None], (C, ma.size, nf, n))
+    vf = np.zeros((C, ma.size, nf, n))
     vf[:, :, 0] = vh[:, None]
-    af = np.zeros((C, fa.size, nf, n))
+    af = np.zeros((C, ma.size, nf, n))
     af[:, :, 2:] = I
-    Q = np.concatenate([at_qh, at_k.reshape(C, n * nk, n), at_f.reshape(C, -1, n)], axis=1).reshape(-1, n)
-    V = np.concatenate([v_qh, vk.reshape(C, n * nk, n), vf.reshape(C, -1, n)], axis=1).reshape(-1, n)
-    A = np.concatenate([a_qh, ak.reshape(C, n * nk, n), af.reshape(C, -1, n)], axis=1).reshape(-1, n)
-    E = at_qh.shape[1] + n * nk + fa.size * nf
+    Q = np.concatenate([at_qh, at_k.reshape(C, n * nk, n), at_0, at_f.reshape(C, -1, n)], axis=1).reshape(-1, n)
+    V = np.concatenate([v_qh, vk.reshape(C, n * nk, n), np.broadcast_to(vh[:, None], (C, n, n)),
+                        vf.reshape(C, -1, n)], axis=1).reshape(-1, n)
+    A = np.concatenate([a_qh, ak.reshape(C, n * nk, n), np.zeros((C, n, n)), af.reshape(C, -1, n)],
+                       axis=1).reshape(-1, n)
+    E = at_qh.shape[1] + n * nk + n + ma.size * nf
     sh = (5 * n * (n + 1),)
     Y = regressor(ch, Q, V, A, packed=True).reshape((C, E) + sh)
     h0 = at_qh.shape[1]
     Yk = Y[:, h0:h0 + n * nk].reshape((C, n, nk) + sh)  # views: the in-place differences of local_bounds work on them
     pair = np.zeros((C, n, n) + sh)
     pair[:, pa, pb] = Y[:, 2 + n:2 + n + pa.size]
-    Yf = Y[:, h0 + n * nk:].reshape((C, fa.size, nf) + sh)
+    Y0 = Y[:, h0 + n * nk:h0 + n * nk + n]
+    Yf = Y[:, h0 + n * nk + n:].reshape((C, ma.size, nf) + sh)
     fab = np.empty((C, n, n) + sh)
-    fab[:, fa, fb] = Yf[:, :, 0]
-    fab[:, fb, fa] = Yf[:, :, 0]
+    fab[:, 0, :] = Y0
+    fab[:, :, 0] = Y0
+    fab[:, ma, mb] = Yf[:, :, 0]
+    fab[:, mb, ma] = Yf[:, :, 0]
     return {"g0": Y[:, 0], "f0": Y[:, 1], "ha": Y[:, 2:2 + n], "pair": pair, "Mc": Y[:, 2 + n + pa.size:h0],
             "gk": Yk[:, :, 0], "fk": Yk[:, :, 1], "Mk": Yk[:, :, 2:2 + n], "Vp": Yk[:, :, 2 + n:2 + 2 * n],
             "Vm": Yk[:, :, 2 + 2 * n:], "fab": fab, "gab": Yf[:, :, 1], "Mab": Yf[:, :, 2:]}
@@ -214,7 +221,7 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
            "pair": np.zeros((C, n, n) + sh), "Mc": np.empty((C, n) + sh), "gk": np.empty((C, n) + sh),
            "fk": np.empty((C, n) + sh), "Mk": np.empty((C, n, n) + sh), "Vp": np.empty((C, n, n) + sh),
            "Vm": np.empty((C, n, n) + sh), "fab": np.empty((C, n, n) + sh),
-           "gab": np.empty((C, n * (n + 1) // 2) + sh), "Mab": np.empty((C, n * (n + 1) // 2, n) + sh)}
+           "gab": np.empty((C, n * (n - 1) // 2) + sh), "Mab": np.empty((C, n * (n - 1) // 2, n) + sh)}
     g0, f0, ha, pair, Mc, gk, fk, Mk, Vp, Vm, fab, gab, Mab = out.values()
     for c in range(C):
         qq, v = qh[c], vh[c]
@@ -240,7 +247,9 @@ def _pinocchio_calls(robot, qh, vh) -> dict:
                 qab = qq + (shifts[a] + shifts[b])
                 fab[c, a, b] = Y(model, data, qab, v, Z)
                 fab[c, b, a] = fab[c, a, b]
-                P = a * n - a * (a - 1) // 2 + b - a  # the pair's index in np.triu_indices(n) order
+                if a == 0:  # M does not depend on the first joint (mass_pairs)
+                    continue
+                P = (a - 1) * (n - 1) - (a - 1) * (a - 2) // 2 + b - a  # the pair's index in mass_pairs(n)
                 gab[c, P] = Y(model, data, qab, Z, Z)
                 for d in range(n):
                     Mab[c, P, d] = Y(model, data, qab, Z, I[d])
@@ -348,11 +357,20 @@ def step_displacements(dq, e0, e1, ebar, qddm, dt):
     return dq_mean, dq_max
 
 
+def mass_pairs(n: int):
+    """The pairs ``1 <= a <= k < n`` (0-based joints) where the mass matrix's second derivatives can be nonzero, in
+    ``np.triu_indices(n - 1)`` order shifted by one: M does not depend on the first joint's angle (it turns the
+    whole arm about an axis fixed in the base, a rigid rotation that leaves the kinetic energy unchanged), so every
+    derivative of M in ``q_0`` is exactly 0."""
+    fa, fb = np.triu_indices(n - 1)
+    return fa + 1, fb + 1
+
+
 def mass_derivatives(Mc, Mk, gk, Mab, gab, qh, geo):
     """The mass matrix's first and second q-derivatives at a step's mid position ``qh`` from the regressor at
     ``qh``, ``qh + ETA e_k`` and ``qh + ETA (e_a + e_k)`` (arrays over C steps, the entries last; the columns of M are
     ``Y(q, 0, e_b) - Y(q, 0, 0)``): Mc (C, b, ...) at qh (gravity subtracted); Mk (C, k, b, ...), gk (C, k, ...); Mab
-    (C, P, b, ...), gab (C, P, ...) at the pairs a <= k in ``np.triu_indices(n)`` order.
+    (C, P, b, ...), gab (C, P, ...) at the pairs of :func:`mass_pairs` (the others are 0).
     Returns ``(dM, eps, HB0)``, HB0 (C, P, b, ...) per pair (a, k):
 
     * ``dM[k, b] = (4 M(qh + ETA e_k) - 3 M(qh) - M(qh + 2 ETA e_k)) / (2 ETA)``, second-order accurate:
@@ -366,14 +384,16 @@ def mass_derivatives(Mc, Mk, gk, Mab, gab, qh, geo):
       another point zeta add ``8 M |zeta - xi|_1`` (:func:`mass_hessian_bound`)."""
     eta, mbar = ETA, geo["M"]
     n = Mc.shape[1]
-    fa, fb = np.triu_indices(n)
-    diag = np.flatnonzero(fa == fb)  # the pairs (k, k)
+    fa, fb = mass_pairs(n)
+    diag = np.flatnonzero(fa == fb)  # the pairs (k, k), k >= 1
     M1 = Mk - gk[:, :, None]
-    dM = (4.0 * M1 - 3.0 * Mc[:, None] - (Mab[:, diag] - gab[:, diag, None])) / (2 * eta)
+    dM = np.zeros_like(M1)  # dM / dq_0 = 0 exactly (mass_pairs)
+    dM[:, 1:] = (4.0 * M1[:, 1:] - 3.0 * Mc[:, None] - (Mab[:, diag] - gab[:, diag, None])) / (2 * eta)
     ulp = np.spacing(np.max(np.abs(qh), axis=1) + 4 * eta).reshape((-1,) + (1,) * (Mk.ndim - 1))
     grow = 1 + 8 * U
     vmag = mbar + 2 * geo["g"]  # |Y(q, 0, e_b)| + |Y(q, 0, 0)| per unit parameter
     eps = ((eta * eta / 3) * 8 * mbar + (PIN_REL + 16 * U) * 8 * vmag / (2 * eta) + 8 * mbar * ulp / eta) * grow
+    eps = eps * (np.arange(n) > 0).reshape((1, n) + (1,) * (Mk.ndim - 2))  # (C, k, 1, ...): exact for k = 0
     # per pair a <= k: M(qh + ETA (e_a + e_k)) - M(qh + ETA e_a) - M(qh + ETA e_k) + M(qh), as Mab - (gab + M1_a +
     # M1_k - Mc) in one buffer
     S = M1[:, fa]
@@ -402,10 +422,9 @@ def _pair_sum(HB, z):
 
 
 def _pair_contract(tz, x, y):
-    """``sum_ak t[a, k] x_a y_k`` with ``t`` symmetric in (a, k) given per pair a <= k (tz (C, P, ...)), in index
-    order: the pair (a, k) stands for both orders."""
-    n = x.shape[1]
-    fa, fb = np.triu_indices(n)
+    """``sum_ak t[a, k] x_a y_k`` with ``t`` symmetric in (a, k) given per pair of :func:`mass_pairs` (tz (C, P,
+    ...); 0 on the others), in index order: the pair (a, k) stands for both orders."""
+    fa, fb = mass_pairs(x.shape[1])
     coef = x[:, fa] * y[:, fb] + np.where(fa != fb, x[:, fb] * y[:, fa], 0.0)
     return np.sum(tz * coef[(slice(None), slice(None)) + (None,) * (tz.ndim - 2)], axis=1)
 
