@@ -30,68 +30,8 @@ Printed per arm also: each round of the certified hull (its rows: the first roun
 :func:`ident.estimators.uncertain_signed.coarse_step`; seconds; simplex iterations; the median of its box's
 width over the prior's).
 
-Measured with ``--threads 1``, 12 s logs, the kernel family (6324 rows for the UR5, 58 base parameters; the Panda
-7378 rows, 69), each run sharing the 2-core machine with one other job:
-
-======  =======  ===================  ============  ========  =====  ===========  ================  ========
-arm     commit   identify --spec [s]  equation [s]  hull [s]  LP     width/prior  certified/tuned   enclosed
-======  =======  ===================  ============  ========  =====  ===========  ================  ========
-UR5     3217b55  218                  46            171       1251   0.0737       1.64              58/58
-UR5     6fc8ab8  139                  39            99        1904   0.0438       1.13              58/58
-UR5     7025314  105                  38            66        2399   0.0438       1.13              58/58
-Panda   40b2d46  255                  53            201       1490   0.196        4.65              69/69
-Panda   6fc8ab8  247                  66            181       2532   0.0426       1.21              69/69
-UR5     a5ad6ff  117                  53            63        1630   0.0445       1.14              58/58
-Panda   a5ad6ff  213                  90            122       2263   0.0435       1.23              69/69
-UR5     2b4eace  43.6                 18.4          24.6      1630   0.0445       1.14              58/58
-Panda   2b4eace  76.8                 29.2          46.9      2263   0.0435       1.23              69/69
-UR5     9493379  29.0                 10.0          18.2      1624   0.0470       1.15              58/58
-Panda   9493379  57.6                 16.7          39.9      2236   0.0384       1.12              69/69
-UR5     6308044  26.7                 10.0          15.8      1615   0.0470       1.15              58/58
-Panda   6308044  48.2                 16.2          31.0      2282   0.0384       1.12              69/69
-UR5     f2be299  38.3                 14.1          22.8      1631   0.0470       1.15              58/58
-Panda   f2be299  82.2                 26.4          54.3      2228   0.0384       1.12              69/69
-UR5     4fffe11  36.1                 9.7           24.1      1631   0.0470       1.15              58/58
-Panda   4fffe11  58.4                 11.5          45.3      2228   0.0384       1.12              69/69
-UR5     65d4861  32.7                 7.4           23.7      1616   0.0469       1.14              58/58
-Panda   65d4861  54.8                 11.4          42.0      2225   0.0382       1.12              69/69
-UR5     92fd9d8  38.3                 13.1          23.6      1319   0.0346       0.98              58/58
-Panda   92fd9d8  73.5                 29.0          42.7      1668   0.0261       0.96              69/69
-UR5     1015231  29.9                 8.8           19.8      1292   0.0345       0.98              58/58
-Panda   1015231  66.6                 24.0          41.1      1661   0.0261       0.96              69/69
-======  =======  ===================  ============  ========  =====  ===========  ================  ========
-
-(LP: HiGHS runs, 0 fallbacks in all; certified/tuned: the median over the base parameters of the width ratio, the
-tuned hull at the true torque bound 0.8 N m, 4.6 s for the UR5 and 6.5 s for the Panda. The UR5's first row is the
-earlier table's ``new`` run at 3217b55; its row at 7025314 ran alone on the machine, with the hull's minima and
-maxima in two processes, :mod:`ident.estimators.hull_split`, its CPU time 99 s. From a5ad6ff the rows are the
-default stride's, a row every L // 4 samples (2190 and 2555 rows, kernel windows every 50 and 90 samples, against
-6324 and 7378 rows before). The a5ad6ff rows ran in one process (``H4BENCH_HULL_PROCESSES=1``) beside a 2-worker
-campaign; the 2b4eace rows ran alone on the machine, with the family's two kernels and the hull's two halves each in
-two processes (the same boxes, bit for bit). The hull took 6 and 7 rounds. The 9493379 rows ran alone on the
-machine: the family's kernels share one pass of the per-step stage, split between two processes at the log's middle
-(the same rows as 2b4eace's, bit for bit); the hull's least-squares centre by Jacobi rotations in waves (it took 1.4 s
-per round for the Panda) and its rounds on the dual simplex (1 and 6 runs stopped at the iteration limit, re-run
-cold); and the base parameters by h4bench.portable instead of LAPACK: another choice among equal columns, so the
-widths are of other parameters and another prior. Tuned hulls 2.2 s and 3.1 s. At 6308044 a warm-started LP run is
-cut at 1000 simplex iterations and re-run cold (uncertain_signed.SIGNED_BUDGET: 5 and 25 such runs). The f2be299 and
-4fffe11 rows ran one after the other in one session on a slower machine, alone on it: at 4fffe11 the regressor of a
-revolute chain is evaluated in compiled code, a step's evaluations in one call (ident.robots.chain), and the per-step
-stage keeps the regressor entries a chain can fill only; the same boxes, the equations 0.69 and 0.44 times as long.
-The 65d4861 rows ran alone on that machine: the within-step motion bounds made exact (the speed's deviation from its
-secant, the step's excursion from its chord, the quadratic speed term); on these torque-dominated logs the boxes
-narrow by 0.2-0.6 % (median width 0.04703 -> 0.04692 and 0.03842 -> 0.03821 of the prior). The 92fd9d8 rows ran
-alone on that machine in the same session: the equation in Lagrangian form (``-int k' M qd - int k dT/dq``, no
-acceleration and no speed at a sample instant; the mass matrix's derivatives at every step); an earlier run of the
-same code took 32.3 s (UR5: 12.3 + 18.5) and 65.7 s (Panda: 23.4 + 40.9). At 1015231 no derivative of M in the
-first joint's angle (it is exactly 0): 21 instead of 28 corners with M for the Panda.)
-What changed: the q-q remainder of the
-Coriolis and gravity terms bounded with the step's local Hessian (9a2d32f), the speed's first-order term integrated
-exactly (1b54bd7), and the hull refined until it stops shrinking, its first rounds on every fourth window (58b3069,
-6fc8ab8). At 6fc8ab8 the Panda's hull took 9 rounds (median width / prior after each: 0.711, 0.229, 0.110, 0.0619,
-0.0533, 0.0470 on 1848 rows, 0.0448 on 3689, 0.0434 and 0.0426 on all 7378), the UR5's 8 (0.395 ... 0.0461 on 1584
-rows, 0.0450 on 3162, 0.0441 and 0.0438 on 6324); the first round on all rows cost 45 s (UR5) and 77 s (Panda) of
-the 99 and 181 s.
+The measured history of this benchmark (per commit: seconds, LP runs, widths, what changed) is in
+docs/serial.md, section "Measured history of the arms' certified box".
 
 ``--compare`` (the hull's LP switches against their state at 7b00d11) was measured at 3217b55 with ``--repeats 1``
 (load 2-4): UR5 649 s former against 218 s new (hull 573 s against 171 s, 2364 against 1251 HiGHS runs, the boxes
